@@ -1,0 +1,1 @@
+"""jaxfilters: Nav2-faithful costmap filters as batched, jittable JAX functions."""

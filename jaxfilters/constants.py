@@ -1,0 +1,28 @@
+"""Nav2 cost values, occupancy values and filter type codes (spec §1)."""
+
+# Costmap cell values (nav2_costmap_2d/cost_values.hpp), uint8.
+FREE_SPACE = 0
+MAX_NON_OBSTACLE = 252
+INSCRIBED_INFLATED_OBSTACLE = 253
+LETHAL_OBSTACLE = 254
+NO_INFORMATION = 255
+
+# nav_msgs/OccupancyGrid values, int8.
+OCC_GRID_UNKNOWN = -1
+OCC_GRID_FREE = 0
+OCC_GRID_OCCUPIED = 100
+
+# CostmapFilterInfo.type codes (nav2_util filter_values.hpp).
+KEEPOUT_FILTER = 0
+SPEED_FILTER_PERCENT = 1
+SPEED_FILTER_ABSOLUTE = 2
+BINARY_FILTER = 3
+ZONE_PARAMETER_FILTER = 4
+FILTER_TYPES = (KEEPOUT_FILTER, SPEED_FILTER_PERCENT, SPEED_FILTER_ABSOLUTE,
+                BINARY_FILTER, ZONE_PARAMETER_FILTER)
+
+BASE_DEFAULT = 0.0
+MULTIPLIER_DEFAULT = 1.0
+SPEED_MASK_UNKNOWN = -1
+SPEED_MASK_NO_LIMIT = 0
+NO_SPEED_LIMIT = 0.0
