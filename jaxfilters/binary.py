@@ -1,0 +1,101 @@
+"""BinaryFilter (spec §6): flip a per-robot boolean when the robot enters a zone.
+
+State in, new state plus `published` out. Nav2's publish rules:
+* outside the mask: state = default_state, published on **every** cycle;
+* unknown cell (d == -1): nothing;
+* `base + d * multiplier > flip_threshold` (strict, decided exactly): state =
+  !default_state, published only when it was default_state; otherwise state =
+  default_state, published only when it differed.
+`BinaryState.create` starts at False whatever `default_state` is, as Nav2's
+construction does (its first publish is false even with default_state true).
+"""
+
+from __future__ import annotations
+
+import jax
+import jax.numpy as jnp
+
+from jaxfilters import constants
+from jaxfilters import geometry
+from jaxfilters.speed import _exact_sign_affine, _mask_leaves, _transform_point
+from jaxfilters.types import FilterMask, _dataclass, check_poses, resolve_mask_index
+
+_F32 = jnp.float32
+
+
+@_dataclass
+class BinaryState:
+  """Per-robot BinaryFilter state: `binary_state` bool [B]."""
+  binary_state: jax.Array
+
+  @classmethod
+  def create(cls, num_robots: int) -> "BinaryState":
+    return cls(jnp.zeros((num_robots,), bool))
+
+
+@_dataclass
+class BinaryResult:
+  """One BinaryFilter cycle per robot.
+
+  Attributes:
+    binary_state: bool [B], the state after this cycle.
+    published: bool [B], Nav2 would publish std_msgs/Bool(binary_state).
+    in_mask: bool [B], the robot was on a known mask cell.
+  """
+  binary_state: jax.Array
+  published: jax.Array
+  in_mask: jax.Array
+
+
+def binary_filter_one(state, data, mask_origin, mask_res, info, pose, default_state,
+                      flip_threshold, enabled, transform):
+  """BinaryFilter::process for one robot (scalar leaves; see module docstring)."""
+  hm, wm = data.shape
+  xy = pose[:2] if transform is None else _transform_point(transform, pose[:2])
+  mx, my, inside = geometry.world_to_cell(xy[0], xy[1], mask_origin, mask_res, wm, hm)
+  d = data[my, mx].astype(jnp.int32)
+  # A mask of another type is never subscribed in Nav2: the filter does nothing.
+  active = enabled & (info.type == constants.BINARY_FILTER)
+  known = inside & (d != constants.OCC_GRID_UNKNOWN)
+  above = _exact_sign_affine(d, info.multiplier, info.base, flip_threshold) > 0
+  target = jnp.where(above, ~default_state, default_state)
+  s = state.binary_state
+  new = jnp.where(inside, jnp.where(known, target, s), default_state)
+  published = jnp.where(inside, known & (new != s), True)
+  new = jnp.where(active, new, s)
+  return BinaryState(new), BinaryResult(new, active & published, active & known)
+
+
+def binary_filter(mask: FilterMask, poses, state: BinaryState, *, default_state=False,
+                  flip_threshold=50.0, mask_index=None, enabled=None,
+                  transform=None) -> tuple[BinaryState, BinaryResult]:
+  """Nav2 BinaryFilter over a fleet.
+
+  Args:
+    mask: FilterMask of type 3 (other types make the filter inert, as in Nav2).
+    poses: float [B, 3].
+    state: BinaryState [B].
+    default_state: bool [B] or scalar (Nav2 `default_state`).
+    flip_threshold: float [B] or scalar (Nav2 `flip_threshold`, default 50.0),
+      compared as float32.
+    mask_index, enabled, transform: as jaxfilters.speed.speed_filter.
+
+  Returns:
+    (new BinaryState, BinaryResult [B]).
+  """
+  with jax.named_scope("binary_filter"):
+    b = state.binary_state.shape[0]
+    idx = resolve_mask_index(mask, mask_index, b)
+    poses = check_poses(poses, b)
+    bc = lambda x, dt: jnp.broadcast_to(jnp.asarray(x, dt), (b,))
+    enabled = bc(True if enabled is None else enabled, bool)
+    default_state = bc(default_state, bool)
+    flip_threshold = bc(flip_threshold, _F32)
+    if transform is not None:
+      transform = jnp.broadcast_to(jnp.asarray(transform, _F32), (b, 3))
+
+    def one(st, i, pose, ds, thr, en, tf):
+      return binary_filter_one(st, *_mask_leaves(mask, i), pose, ds, thr, en, tf)
+
+    return jax.vmap(one, in_axes=(0, 0, 0, 0, 0, 0, None if transform is None else 0))(
+        state, idx, poses, default_state, flip_threshold, enabled, transform)

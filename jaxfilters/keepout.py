@@ -1,0 +1,322 @@
+"""KeepoutFilter (spec §4): write no-go zones from a mask into each robot's costmap.
+
+Nav2's filter runs in two phases per costmap cycle, and so does this module:
+
+* `keepout_update_bounds` is `KeepoutFilter::updateBounds` (§4.2): it grows the
+  update window when a new mask arrives (with Nav2's quirk of using the master
+  grid's origin and resolution with the mask's cell counts) and runs the
+  robot-in-zone test of the escape mode (`override_lethal_cost`), growing an
+  accumulated box while the robot is inside a zone and one cycle after.
+* `keepout_filter` is `KeepoutFilter::process` (§4.3-§4.4): for each visited
+  master cell, sample the mask at the cell centre and raise the cost
+  (`data > old or old == 255`), skipping unknown mask cells; in escape mode the
+  written value is `lethal_override_cost`.
+
+Both are written for one robot (`*_one`) and vmapped once at the public edge.
+Lanes (seed design: "covered by KeepoutFilter") are keepout masks with graded
+values 1..99, which give intermediate costs round(2.54 * d).
+
+Float policy: same-frame cell mapping is exact (jaxfilters.geometry). With a
+frame transform (`transform` given) each master cell centre is rotated in
+float32, then mapped exactly; Nav2 rotates in float64, so a centre that lands
+within ~1e-6 m of a mask cell boundary may pick the neighbouring mask cell.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+from functools import partial
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+
+from jaxfilters import constants
+from jaxfilters import geometry
+from jaxfilters.types import Costmap, FilterMask, _dataclass, check_poses, resolve_mask_index
+
+_F32 = jnp.float32
+_EMPTY_BOX = (np.inf, np.inf, -np.inf, -np.inf)
+
+
+def occ_to_cost(data: jax.Array) -> jax.Array:
+  """Mask value -> cost (spec §1.4): round-half-away(2.54 * d), -1 -> 255.
+
+  Values outside -1..100 (never produced by map_server; undefined behaviour in
+  Nav2) are treated as unknown (255), as the spec recommends. Uses integer
+  arithmetic: floor((254 d + 50) / 100) == floor(2.54 d + 0.5) exactly.
+
+  Args:
+    data: int8 (or any integer) array of OccupancyGrid values.
+
+  Returns:
+    uint8 array of the same shape.
+  """
+  d = jnp.asarray(data).astype(jnp.int32)
+  cost = (d * 254 + 50) // 100
+  return jnp.where((d >= 0) & (d <= 100), cost, constants.NO_INFORMATION).astype(jnp.uint8)
+
+
+@dataclasses.dataclass(frozen=True)
+class KeepoutConfig:
+  """Static keepout options (Nav2 parameters `<filter>.override_lethal_cost` etc.).
+
+  Attributes:
+    override_lethal_cost: escape mode; while the robot's centre is in a lethal
+      keepout cell, every cell the filter writes gets `lethal_override_cost`.
+    lethal_override_cost: clamped to [0, 252] like Nav2 (MAX_NON_OBSTACLE).
+  """
+  override_lethal_cost: bool = False
+  lethal_override_cost: int = constants.MAX_NON_OBSTACLE
+
+  def __post_init__(self):
+    if not isinstance(self.override_lethal_cost, (bool, np.bool_)):
+      raise ValueError(f"override_lethal_cost must be a bool; got {self.override_lethal_cost!r}")
+    if int(self.lethal_override_cost) != self.lethal_override_cost:
+      raise ValueError(f"lethal_override_cost must be an integer cost; got {self.lethal_override_cost!r}")
+    # Nav2 clamps rather than rejects.
+    object.__setattr__(self, "lethal_override_cost",
+                       int(min(max(int(self.lethal_override_cost), 0), constants.MAX_NON_OBSTACLE)))
+
+
+@_dataclass
+class KeepoutState:
+  """Per-robot state KeepoutFilter carries between cycles.
+
+  Attributes:
+    is_pose_lethal: bool [B], robot centre in a lethal keepout cell (escape mode).
+    last_pose_lethal: bool [B], the value at the end of the last process().
+    acc_box: float32 [B, 4] world (min_x, min_y, max_x, max_y) accumulated while
+      the robot is in a zone; (+inf, +inf, -inf, -inf) when empty.
+  """
+  is_pose_lethal: jax.Array
+  last_pose_lethal: jax.Array
+  acc_box: jax.Array
+
+  @classmethod
+  def create(cls, num_robots: int) -> "KeepoutState":
+    return cls(jnp.zeros((num_robots,), bool), jnp.zeros((num_robots,), bool),
+               jnp.tile(jnp.asarray(_EMPTY_BOX, _F32), (num_robots, 1)))
+
+
+def _pose_in_lethal_zone(data, mask_origin, mask_res, info_xy):
+  h, w = data.shape
+  mx, my, valid = geometry.world_to_cell(info_xy[0], info_xy[1], mask_origin, mask_res, w, h)
+  return valid & (occ_to_cost(data[my, mx]) >= constants.INSCRIBED_INFLATED_OBSTACLE)
+
+
+def _to_mask_frame(transform, x, y):
+  """Applies T_mask_from_global = (tx, ty, yaw) to global-frame points (float32)."""
+  c, s = jnp.cos(transform[2]), jnp.sin(transform[2])
+  return c * x - s * y + transform[0], s * x + c * y + transform[1]
+
+
+def keepout_update_bounds_one(state, data, mask_origin, mask_res, pose, bounds,
+                              master_origin, master_res, new_mask, enabled, transform,
+                              *, override_lethal_cost: bool):
+  """KeepoutFilter::updateBounds for one robot (spec §4.2).
+
+  Args:
+    state: KeepoutState of one robot (scalar leaves, acc_box [4]).
+    data: int8 [Hm, Wm] this robot's mask.
+    mask_origin, mask_res: float32 [2], [].
+    pose: float32 [3], robot (x, y, yaw) in the costmap's global frame.
+    bounds: float32 [4] world (min_x, min_y, max_x, max_y) so far this cycle.
+    master_origin, master_res: the costmap's geometry ([2], []).
+    new_mask: bool [], a new mask arrived since the last cycle.
+    enabled: bool [].
+    transform: float32 [3] T_mask_from_global or None (same frame).
+    override_lethal_cost: static, escape mode.
+
+  Returns:
+    (new state, new bounds).
+  """
+  hm, wm = data.shape
+  # New mask: grow to the master-grid centres of (0, 0) and (Wm, Hm) (Nav2 quirk) and return.
+  lo = master_origin + 0.5 * master_res
+  hi = master_origin + (jnp.asarray([wm, hm], _F32) + 0.5) * master_res
+  grown = jnp.concatenate([jnp.minimum(bounds[:2], lo), jnp.maximum(bounds[2:], hi)])
+
+  xy = pose[:2]
+  if transform is not None:
+    xy = jnp.stack(_to_mask_frame(transform, xy[0], xy[1]))
+  lethal = jnp.asarray(False)
+  if override_lethal_cost:
+    lethal = _pose_in_lethal_zone(data, mask_origin, mask_res, xy)
+  keep_box = override_lethal_cost & (lethal | state.last_pose_lethal)
+  union = jnp.concatenate([jnp.minimum(state.acc_box[:2], bounds[:2]),
+                           jnp.maximum(state.acc_box[2:], bounds[2:])])
+  acc = jnp.where(keep_box, union, jnp.asarray(_EMPTY_BOX, _F32))
+  normal_state = KeepoutState(lethal, state.last_pose_lethal, acc)
+  normal_bounds = jnp.where(keep_box, union, bounds)
+
+  pick = lambda a, b: jax.tree.map(lambda x, y: jnp.where(new_mask, x, y), a, b)
+  out_state = pick(state, normal_state)
+  out_bounds = jnp.where(new_mask, grown, normal_bounds)
+  out_state = jax.tree.map(lambda x, y: jnp.where(enabled, x, y), out_state, state)
+  return out_state, jnp.where(enabled, out_bounds, bounds)
+
+
+def _same_frame_window(shape_m, mask_origin, mask_res, origin, res, window):
+  """Nav2's same-frame overlap clip with the mask's half cell (spec §4.3)."""
+  hm, wm = shape_m
+  half = 0.5 * mask_res
+  min_i, min_j, max_i, max_j = window[0], window[1], window[2], window[3]
+  g0 = [geometry.trunc_div_exact([mask_origin[k], half, -origin[k]], res) for k in (0, 1)]
+  size = (wm, hm)
+  g1 = [geometry.trunc_div_exact([mask_origin[k], *geometry.exact_product(jnp.asarray(size[k], _F32), mask_res),
+                                  half, -origin[k]], res) for k in (0, 1)]
+  overlap = ~((g0[0] >= max_i) | (g0[1] >= max_j)) & ~((g1[0] <= min_i) | (g1[1] <= min_j))
+  x0, y0 = jnp.maximum(min_i, g0[0]), jnp.maximum(min_j, g0[1])
+  x1, y1 = jnp.minimum(max_i, g1[0]), jnp.minimum(max_j, g1[1])
+  return overlap, (x0, y0, x1, y1)
+
+
+def keepout_one(cost, origin, res, data, mask_origin, mask_res, state, window, enabled,
+                transform, *, config: KeepoutConfig):
+  """KeepoutFilter::process for one robot's costmap (spec §4.3-§4.4).
+
+  Args:
+    cost: uint8 [H, W] the combined costmap.
+    origin, res: float32 [2], [] its geometry.
+    data: int8 [Hm, Wm] this robot's mask.
+    mask_origin, mask_res: float32 [2], [].
+    state: KeepoutState for this robot (scalar leaves).
+    window: int32 [4] (min_i, min_j, max_i, max_j), half-open update window.
+    enabled: bool [].
+    transform: float32 [3] T_mask_from_global (x, y, yaw), or None for the same frame.
+    config: static KeepoutConfig.
+
+  Returns:
+    (new cost uint8 [H, W], new state).
+  """
+  h, w = cost.shape
+  hm, wm = data.shape
+  min_i, min_j, max_i, max_j = window[0], window[1], window[2], window[3]
+  cols = jnp.arange(w, dtype=jnp.int32)
+  rows = jnp.arange(h, dtype=jnp.int32)
+  if transform is None:
+    overlap, (x0, y0, x1, y1) = _same_frame_window((hm, wm), mask_origin, mask_res, origin, res, window)
+    mx, vx = geometry.centres_to_cells(w, origin[0], res, mask_origin[0], mask_res, wm)
+    my, vy = geometry.centres_to_cells(h, origin[1], res, mask_origin[1], mask_res, hm)
+    visit = (((cols >= x0) & (cols < x1) & vx)[None, :] & ((rows >= y0) & (rows < y1) & vy)[:, None])
+    mask_val = data[my[:, None], mx[None, :]]
+  else:
+    overlap = jnp.asarray(True)
+    cx = origin[0] + (cols.astype(_F32) + 0.5) * res
+    cy = origin[1] + (rows.astype(_F32) + 0.5) * res
+    px, py = _to_mask_frame(transform, cx[None, :], cy[:, None])
+    mx, my, inside = geometry.world_to_cell(px, py, mask_origin, mask_res, wm, hm)
+    in_window = (((cols >= min_i) & (cols < max_i))[None, :] & ((rows >= min_j) & (rows < max_j))[:, None])
+    visit = inside & in_window
+    mask_val = data[my, mx]
+  mask_cost = occ_to_cost(mask_val)
+  write = (visit & (mask_cost != constants.NO_INFORMATION)
+           & ((mask_cost > cost) | (cost == constants.NO_INFORMATION)))
+  if config.override_lethal_cost:
+    value = jnp.where(state.is_pose_lethal, jnp.uint8(config.lethal_override_cost), mask_cost)
+  else:
+    value = mask_cost
+  run = enabled & overlap
+  new_cost = jnp.where(run & write, value, cost)
+  new_state = dataclasses.replace(
+      state, last_pose_lethal=jnp.where(run, state.is_pose_lethal, state.last_pose_lethal))
+  return new_cost, new_state
+
+
+def _batched_inputs(costmap, mask, poses, mask_index, enabled, window, transform):
+  b = costmap.num_robots
+  h, w = costmap.cost.shape[1:]
+  idx = resolve_mask_index(mask, mask_index, b)
+  poses = check_poses(poses, b)
+  enabled = jnp.broadcast_to(jnp.asarray(True if enabled is None else enabled, bool), (b,))
+  if window is None:
+    window = jnp.tile(jnp.asarray([0, 0, w, h], jnp.int32), (b, 1))
+  else:
+    window = jnp.asarray(window)
+    if window.shape not in ((4,), (b, 4)) or not jnp.issubdtype(window.dtype, jnp.integer):
+      raise ValueError(f"window must be integer (min_i, min_j, max_i, max_j) of shape (4,) or ({b}, 4); "
+                       f"got {window.dtype}{tuple(window.shape)}")
+    # Clip to the map like LayeredCostmap does.
+    window = jnp.broadcast_to(window.astype(jnp.int32), (b, 4))
+    window = jnp.stack([jnp.maximum(window[:, 0], 0), jnp.maximum(window[:, 1], 0),
+                        jnp.minimum(window[:, 2], w), jnp.minimum(window[:, 3], h)], axis=1)
+  if transform is not None:
+    transform = jnp.asarray(transform, _F32)
+    if transform.shape not in ((3,), (b, 3)):
+      raise ValueError(f"transform must be T_mask_from_global (x, y, yaw) of shape (3,) or ({b}, 3); "
+                       f"got {tuple(transform.shape)}")
+    transform = jnp.broadcast_to(transform, (b, 3))
+  return idx, poses, enabled, window, transform
+
+
+def keepout_filter(costmap: Costmap, mask: FilterMask, poses, state: KeepoutState, *,
+                   mask_index=None, enabled=None, window=None, transform=None,
+                   config: KeepoutConfig = KeepoutConfig()) -> tuple[Costmap, KeepoutState]:
+  """Nav2 KeepoutFilter::process over a fleet (spec §4.3-§4.4).
+
+  Args:
+    costmap: Costmap with cost uint8 [B, H, W] (the combined map after layers).
+    mask: FilterMask with M masks (M = 1 shared, or a stack with mask_index).
+    poses: float [B, 3] robot (x, y, yaw) in the costmap frame (used by the
+      escape mode through the state, which `keepout_update_bounds` sets).
+    state: KeepoutState [B].
+    mask_index: optional int [B], which mask each robot uses.
+    enabled: optional bool [B] or scalar (Nav2 `enabled` / toggle_filter); a
+      disabled robot's costmap and state pass through unchanged.
+    window: optional int [B, 4] or [4] (min_i, min_j, max_i, max_j) half-open
+      update window, clipped to the map; default the whole map.
+    transform: optional float [B, 3] or [3] T_mask_from_global (x, y, yaw)
+      when the mask frame differs from the costmap frame; None = same frame.
+    config: static KeepoutConfig.
+
+  Returns:
+    (Costmap with the new cost, new KeepoutState).
+  """
+  with jax.named_scope("keepout_filter"):
+    idx, poses, enabled, window, transform = _batched_inputs(
+        costmap, mask, poses, mask_index, enabled, window, transform)
+    del poses
+
+    def one(cost, origin, res, i, st, win, en, tf):
+      return keepout_one(cost, origin, res, mask.data[i], mask.origin[i], mask.resolution[i],
+                         st, win, en, tf, config=config)
+
+    tf_axis = None if transform is None else 0
+    cost, new_state = jax.vmap(one, in_axes=(0, 0, 0, 0, 0, 0, 0, tf_axis))(
+        costmap.cost, costmap.origin, costmap.resolution, idx, state, window, enabled, transform)
+    return dataclasses.replace(costmap, cost=cost), new_state
+
+
+def keepout_update_bounds(costmap: Costmap, mask: FilterMask, poses, state: KeepoutState,
+                          bounds, *, new_mask=None, mask_index=None, enabled=None,
+                          transform=None, config: KeepoutConfig = KeepoutConfig()):
+  """Nav2 KeepoutFilter::updateBounds over a fleet (spec §4.2).
+
+  Args:
+    costmap: the costmap whose geometry (origin, resolution) the bounds use.
+    mask, poses, state, mask_index, enabled, transform, config: as keepout_filter.
+    bounds: float [B, 4] world (min_x, min_y, max_x, max_y) grown by the layers
+      this cycle (Nav2 starts from (+inf, +inf, -inf, -inf)).
+    new_mask: optional bool [B] or scalar, a new mask arrived since last cycle.
+
+  Returns:
+    (new KeepoutState, new bounds float32 [B, 4]).
+  """
+  with jax.named_scope("keepout_update_bounds"):
+    b = costmap.num_robots
+    idx, poses, enabled, _, transform = _batched_inputs(
+        costmap, mask, poses, mask_index, enabled, None, transform)
+    bounds = jnp.asarray(bounds, _F32)
+    if bounds.shape != (b, 4):
+      raise ValueError(f"bounds must be float [B, 4] = ({b}, 4); got {tuple(bounds.shape)}")
+    new_mask = jnp.broadcast_to(jnp.asarray(False if new_mask is None else new_mask, bool), (b,))
+
+    def one(st, i, pose, bnd, origin, res, nm, en, tf):
+      return keepout_update_bounds_one(
+          st, mask.data[i], mask.origin[i], mask.resolution[i], pose, bnd, origin, res, nm, en, tf,
+          override_lethal_cost=config.override_lethal_cost)
+
+    tf_axis = None if transform is None else 0
+    return jax.vmap(one, in_axes=(0, 0, 0, 0, 0, 0, 0, 0, tf_axis))(
+        state, idx, poses, bounds, costmap.origin, costmap.resolution, new_mask, enabled, transform)

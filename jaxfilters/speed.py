@@ -1,0 +1,299 @@
+"""SpeedFilter (spec §5): the speed limit under each robot, as carried state.
+
+Nav2 publishes a `SpeedLimit` only when the limit changes, keeps the previous
+limit on unknown or off-mask cells, and uses 0.0 for "no limit". Here that is
+explicit state in, new state plus a per-robot `changed` flag out:
+
+    state = SpeedState.create(num_robots)
+    state, out = speed_filter(mask, poses, state)
+    # out.speed_limit [B]: the limit in force; out.changed [B]: Nav2 would publish.
+
+Range checks (percent outside [0, 100], absolute < 0 -> 0.0) are decided
+exactly on `d * multiplier + base` (error-free arithmetic), as Nav2 does in
+float64; the limit value itself is the float32 rounding of that double.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+
+from jaxfilters import constants
+from jaxfilters import geometry
+from jaxfilters.types import FilterInfo, FilterMask, _dataclass, check_poses, resolve_mask_index
+
+_F32 = jnp.float32
+
+
+@_dataclass
+class SpeedState:
+  """Per-robot SpeedFilter state.
+
+  Attributes:
+    speed_limit_prev: float32 [B], the last published limit (Nav2 starts at 0.0
+      and never resets it).
+    path_start: int32 [B], cached closest-segment index for path lookahead.
+    held_lookahead: float32 [B], lookahead distance held while decelerating.
+  """
+  speed_limit_prev: jax.Array
+  path_start: jax.Array
+  held_lookahead: jax.Array
+
+  @classmethod
+  def create(cls, num_robots: int) -> "SpeedState":
+    return cls(jnp.zeros((num_robots,), _F32), jnp.zeros((num_robots,), jnp.int32),
+               jnp.zeros((num_robots,), _F32))
+
+
+@_dataclass
+class SpeedResult:
+  """What one SpeedFilter cycle says, per robot.
+
+  Attributes:
+    speed_limit: float32 [B], the limit in force after this cycle (0.0 = no limit).
+    percentage: bool [B], True for percent of max speed, False for m/s.
+    changed: bool [B], Nav2 would publish a SpeedLimit this cycle.
+    valid: bool [B], a limit was computed this cycle (False off-mask, on an
+      unknown cell, for a mask whose type is not 1 or 2, or when disabled).
+  """
+  speed_limit: jax.Array
+  percentage: jax.Array
+  changed: jax.Array
+  valid: jax.Array
+
+
+@dataclasses.dataclass(frozen=True)
+class LookaheadConfig:
+  """SpeedFilter path lookahead parameters (spec §5.6), with Nav2's corrections.
+
+  Attributes:
+    max_decel: m/s^2, must be negative to scale the distance with speed; a
+      value >= 0 makes the lookahead distance `max_lookahead` (Nav2 WARNs).
+    min_lookahead: m, clamped to >= 0.
+    max_lookahead: m, raised to min_lookahead if smaller.
+  """
+  max_decel: float = -0.5
+  min_lookahead: float = 0.3
+  max_lookahead: float = 5.0
+
+  def __post_init__(self):
+    for name in ("max_decel", "min_lookahead", "max_lookahead"):
+      if not np.isfinite(float(getattr(self, name))):
+        raise ValueError(f"LookaheadConfig.{name} must be finite; got {getattr(self, name)!r}")
+    object.__setattr__(self, "min_lookahead", max(0.0, float(self.min_lookahead)))
+    object.__setattr__(self, "max_lookahead", max(float(self.max_lookahead), self.min_lookahead))
+
+
+def _exact_sign_affine(d, multiplier, base, offset):
+  """Exact sign of d * multiplier + base - offset for float32 inputs (int32 [...])."""
+  terms = [*geometry.exact_product(d.astype(_F32), multiplier), base, -jnp.asarray(offset, _F32)]
+  return geometry.expansion_sign(terms)
+
+
+def speed_limit_at_one(data, mask_origin, mask_res, info: FilterInfo, xy):
+  """SpeedFilter::getSpeedLimitAtPose for one point (spec §5.3).
+
+  Args:
+    data: int8 [Hm, Wm] the mask.
+    mask_origin, mask_res: float32 [2], [].
+    info: FilterInfo with scalar leaves.
+    xy: float32 [2] point in the mask frame.
+
+  Returns:
+    (limit float32 [], valid bool []). Invalid off the mask, on d == -1, or when
+    the info type is neither 1 (percent) nor 2 (absolute): Nav2 then has no mask.
+  """
+  hm, wm = data.shape
+  mx, my, inside = geometry.world_to_cell(xy[0], xy[1], mask_origin, mask_res, wm, hm)
+  d = data[my, mx].astype(jnp.int32)
+  percent = info.type == constants.SPEED_FILTER_PERCENT
+  typed = percent | (info.type == constants.SPEED_FILTER_ABSOLUTE)
+  raw = d.astype(_F32) * info.multiplier + info.base
+  below_zero = _exact_sign_affine(d, info.multiplier, info.base, 0.0) < 0
+  above_100 = _exact_sign_affine(d, info.multiplier, info.base, 100.0) > 0
+  out_of_range = below_zero | (percent & above_100)
+  limit = jnp.where((d == constants.SPEED_MASK_NO_LIMIT) | out_of_range, 0.0, raw)
+  valid = inside & typed & (d != constants.SPEED_MASK_UNKNOWN)
+  return limit.astype(_F32), valid
+
+
+def _publish_step(prev, limit, valid, enabled):
+  """Publish-on-change with keep-previous on invalid cycles (spec §5.4)."""
+  ok = valid & enabled
+  changed = ok & (limit != prev)
+  new_prev = jnp.where(ok, limit, prev)
+  return new_prev, changed, ok
+
+
+def speed_filter_one(state, data, mask_origin, mask_res, info, pose, enabled, transform):
+  """SpeedFilter::process at the robot pose for one robot.
+
+  Args:
+    state: SpeedState of one robot (scalar leaves).
+    data, mask_origin, mask_res, info: this robot's mask.
+    pose: float32 [3] robot pose in the costmap frame.
+    enabled: bool [].
+    transform: float32 [3] T_mask_from_global or None (same frame).
+
+  Returns:
+    (new state, SpeedResult with scalar leaves).
+  """
+  xy = pose[:2]
+  if transform is not None:
+    xy = _transform_point(transform, xy)
+  limit, valid = speed_limit_at_one(data, mask_origin, mask_res, info, xy)
+  prev, changed, ok = _publish_step(state.speed_limit_prev, limit, valid, enabled)
+  out = SpeedResult(prev, info.type == constants.SPEED_FILTER_PERCENT, changed, ok)
+  return dataclasses.replace(state, speed_limit_prev=prev), out
+
+
+def _transform_point(transform, xy):
+  c, s = jnp.cos(transform[2]), jnp.sin(transform[2])
+  return jnp.stack([c * xy[0] - s * xy[1] + transform[0], s * xy[0] + c * xy[1] + transform[1]])
+
+
+def _segment_distance(p, a, b):
+  ab = b - a
+  denom = jnp.sum(ab * ab)
+  t = jnp.where(denom > 0, jnp.clip(jnp.sum((p - a) * ab) / jnp.where(denom > 0, denom, 1.0), 0.0, 1.0), 0.0)
+  return jnp.linalg.norm(p - (a + t * ab))
+
+
+def speed_lookahead_one(state, data, mask_origin, mask_res, info, pose, path, path_len, new_path,
+                        velocity, enabled, *, config: LookaheadConfig):
+  """SpeedFilter::process with path lookahead for one robot (spec §5.6).
+
+  Args:
+    state: SpeedState of one robot.
+    data, mask_origin, mask_res, info: this robot's mask (same frame as the path).
+    pose: float32 [3] robot pose.
+    path: float32 [N, 2] path poses (x, y); only the first `path_len` are used.
+    path_len: int32 [], number of valid path poses (0 = no path: plain filter).
+    new_path: bool [], a new path arrived (resets the cached start index).
+    velocity: float32 [], smoothed |linear x| speed (m/s).
+    enabled: bool [].
+    config: static LookaheadConfig.
+
+  Returns:
+    (new state, SpeedResult with scalar leaves).
+  """
+  n = path.shape[0]
+  v = jnp.abs(velocity)
+  if config.max_decel < 0:
+    dist = jnp.clip(v * v / (2.0 * abs(config.max_decel)), config.min_lookahead, config.max_lookahead)
+    dist = jnp.maximum(dist, state.held_lookahead)
+  else:
+    dist = jnp.asarray(config.max_lookahead, _F32)
+  start = jnp.where(new_path | (state.path_start >= path_len), 0, state.path_start)
+  # Closest segment [i, i+1] from the cached start (first minimum wins).
+  seg = jnp.arange(n, dtype=jnp.int32)
+  seg_dist = jax.vmap(lambda a, b: _segment_distance(pose[:2], a, b))(path, jnp.roll(path, -1, axis=0))
+  seg_ok = (seg >= start) & (seg < path_len - 1)
+  seg_dist = jnp.where(seg_ok, seg_dist, jnp.inf)
+  start = jnp.where(jnp.any(seg_ok), jnp.argmin(seg_dist).astype(jnp.int32), start)
+  start = jnp.where(path_len <= 1, 0, start)
+
+  robot_limit, robot_valid = speed_limit_at_one(data, mask_origin, mask_res, info, pose[:2])
+  step = jnp.linalg.norm(jnp.roll(path, -1, axis=0) - path, axis=1)
+  step = jnp.where((seg >= start) & (seg < path_len - 1), step, 0.0)
+  travelled = jnp.cumsum(step) - step            # distance from start to pose i
+  sampled = (seg >= start) & (seg < path_len) & (travelled <= dist)
+  limits, valids = jax.vmap(lambda xy: speed_limit_at_one(data, mask_origin, mask_res, info, xy))(path)
+  use = sampled & valids & (limits != 0)
+  strictest = jnp.min(jnp.where(use, limits, jnp.inf))
+  strictest = jnp.minimum(strictest, jnp.where(robot_limit != 0, robot_limit, jnp.inf))
+  limit = jnp.where(jnp.isinf(strictest), 0.0, strictest)
+  held = jnp.where(robot_valid & (robot_limit != limit), dist, 0.0)
+
+  has_path = path_len > 0
+  limit = jnp.where(has_path, limit, robot_limit)
+  prev, changed, ok = _publish_step(state.speed_limit_prev, limit, robot_valid, enabled)
+  new_state = SpeedState(prev, jnp.where(has_path, start, state.path_start),
+                         jnp.where(enabled & has_path, held, state.held_lookahead))
+  out = SpeedResult(prev, info.type == constants.SPEED_FILTER_PERCENT, changed, ok)
+  return new_state, out
+
+
+def _common(mask, poses, state, mask_index, enabled, transform):
+  b = state.speed_limit_prev.shape[0]
+  idx = resolve_mask_index(mask, mask_index, b)
+  poses = check_poses(poses, b)
+  enabled = jnp.broadcast_to(jnp.asarray(True if enabled is None else enabled, bool), (b,))
+  if transform is not None:
+    transform = jnp.asarray(transform, _F32)
+    if transform.shape not in ((3,), (b, 3)):
+      raise ValueError(f"transform must be (x, y, yaw) of shape (3,) or ({b}, 3); got {tuple(transform.shape)}")
+    transform = jnp.broadcast_to(transform, (b, 3))
+  return b, idx, poses, enabled, transform
+
+
+def _mask_leaves(mask: FilterMask, i):
+  return (mask.data[i], mask.origin[i], mask.resolution[i], jax.tree.map(lambda x: x[i], mask.info))
+
+
+def speed_filter(mask: FilterMask, poses, state: SpeedState, *, mask_index=None, enabled=None,
+                 transform=None) -> tuple[SpeedState, SpeedResult]:
+  """Nav2 SpeedFilter over a fleet, at each robot's pose (spec §5.3-§5.4).
+
+  Args:
+    mask: FilterMask of type 1 (percent) or 2 (m/s); M = 1 shared or a stack.
+    poses: float [B, 3] robot (x, y, yaw).
+    state: SpeedState [B].
+    mask_index: optional int [B], which mask each robot uses.
+    enabled: optional bool [B] or scalar; a disabled robot publishes nothing.
+    transform: optional [B, 3] or [3] T_mask_from_global for a mask in another frame.
+
+  Returns:
+    (new SpeedState, SpeedResult [B]).
+  """
+  with jax.named_scope("speed_filter"):
+    _, idx, poses, enabled, transform = _common(mask, poses, state, mask_index, enabled, transform)
+
+    def one(st, i, pose, en, tf):
+      return speed_filter_one(st, *_mask_leaves(mask, i), pose, en, tf)
+
+    return jax.vmap(one, in_axes=(0, 0, 0, 0, None if transform is None else 0))(
+        state, idx, poses, enabled, transform)
+
+
+def speed_filter_lookahead(mask: FilterMask, poses, state: SpeedState, paths, path_lengths,
+                           velocities, *, new_path=None, mask_index=None, enabled=None,
+                           config: LookaheadConfig = LookaheadConfig()) -> tuple[SpeedState, SpeedResult]:
+  """Nav2 SpeedFilter with `enable_path_lookahead` over a fleet (spec §5.6).
+
+  The strictest (smallest non-zero) limit along each robot's path within the
+  lookahead distance is published; robots with path_lengths 0 use the plain
+  filter.
+
+  Args:
+    mask, poses, state, mask_index, enabled: as speed_filter (paths and mask in one frame).
+    paths: float [B, N, 2] path positions.
+    path_lengths: int [B], valid poses per path.
+    velocities: float [B], smoothed odometry linear speed (m/s).
+    new_path: optional bool [B] or scalar, a new path arrived this cycle.
+    config: static LookaheadConfig.
+
+  Returns:
+    (new SpeedState, SpeedResult [B]).
+  """
+  with jax.named_scope("speed_filter_lookahead"):
+    b, idx, poses, enabled, _ = _common(mask, poses, state, mask_index, enabled, None)
+    paths = jnp.asarray(paths, _F32)
+    if paths.ndim != 3 or paths.shape[0] != b or paths.shape[2] != 2:
+      raise ValueError(f"paths must be float [B, N, 2] with B = {b}; got {tuple(paths.shape)}")
+    lengths = jnp.asarray(path_lengths)
+    if lengths.shape != (b,) or not jnp.issubdtype(lengths.dtype, jnp.integer):
+      raise ValueError(f"path_lengths must be int [B] = ({b},); got {lengths.dtype}{tuple(lengths.shape)}")
+    vel = jnp.asarray(velocities, _F32)
+    if vel.shape != (b,):
+      raise ValueError(f"velocities must be float [B] = ({b},); got {tuple(vel.shape)}")
+    new_path = jnp.broadcast_to(jnp.asarray(False if new_path is None else new_path, bool), (b,))
+
+    def one(st, i, pose, path, n, npth, v, en):
+      return speed_lookahead_one(st, *_mask_leaves(mask, i), pose, path, n, npth, v, en, config=config)
+
+    return jax.vmap(one)(state, idx, poses, paths, jnp.clip(lengths.astype(jnp.int32), 0, paths.shape[1]),
+                         new_path, vel, enabled)
