@@ -1,1 +1,31 @@
-"""jaxfilters: Nav2-faithful costmap filters as batched, jittable JAX functions."""
+"""jaxfilters: Nav2-faithful costmap filters as batched, jittable JAX functions.
+
+Layers, types -> geometry -> filters -> pipelines (STYLE.md habit 1). Each
+filter is written for one robot (`*_one`) and vmapped once at the public edge;
+public functions take an explicit leading robot axis B.
+"""
+
+from jaxfilters import constants
+from jaxfilters.binary import BinaryResult, BinaryState, binary_filter
+from jaxfilters.geometry import world_to_cell
+from jaxfilters.grid import OccupancyGrid
+from jaxfilters.inflation import InflationConfig, footprint_radii, inflate
+from jaxfilters.keepout import (KeepoutConfig, KeepoutState, keepout_filter, keepout_update_bounds,
+                                occ_to_cost)
+from jaxfilters.map_io import load_map, load_map_image, save_map
+from jaxfilters.pipeline import LayersConfig, costmap_pipeline
+from jaxfilters.speed import (LookaheadConfig, SpeedResult, SpeedState, speed_filter,
+                              speed_filter_lookahead)
+from jaxfilters.static_layer import StaticLayerConfig, static_layer
+from jaxfilters.types import Costmap, FilterInfo, FilterMask
+from jaxfilters.zone import ZoneResult, ZoneState, ZoneTable, zone_filter
+
+__all__ = [
+    "BinaryResult", "BinaryState", "Costmap", "FilterInfo", "FilterMask", "InflationConfig",
+    "KeepoutConfig", "KeepoutState", "LayersConfig", "LookaheadConfig", "OccupancyGrid",
+    "SpeedResult", "SpeedState", "StaticLayerConfig", "ZoneResult", "ZoneState", "ZoneTable",
+    "binary_filter", "constants", "costmap_pipeline", "footprint_radii", "inflate",
+    "keepout_filter", "keepout_update_bounds", "load_map", "load_map_image", "occ_to_cost",
+    "save_map", "speed_filter", "speed_filter_lookahead", "static_layer", "world_to_cell",
+    "zone_filter",
+]

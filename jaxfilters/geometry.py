@@ -87,18 +87,26 @@ def expansion_sign(terms: Sequence[jax.Array]) -> jax.Array:
 
 
 def floor_div_exact(num_terms: Sequence[jax.Array], res: jax.Array) -> jax.Array:
-  """Exact floor(sum(num_terms) / res) as int32, for res > 0 and |quotient| < 2**22."""
+  """Exact floor(sum(num_terms) / res) as int32, for res > 0 and |quotient| < 2**22.
+
+  Both candidate checks (q0 and q0 + 1) run as one stacked expansion, which
+  halves the traced program (compile time matters: this sits in every filter).
+  """
   num_terms = [jnp.asarray(t, _F32) for t in num_terms]
   res = jnp.asarray(res, _F32)
+  shape = jnp.broadcast_shapes(res.shape, *[t.shape for t in num_terms])
+  num_terms = [jnp.broadcast_to(t, shape) for t in num_terms]
+  res = jnp.broadcast_to(res, shape)
   approx = num_terms[0]
   for t in num_terms[1:]:
     approx = approx + t
   q0 = jnp.floor(approx / res)
   q0 = jnp.where(jnp.isfinite(q0), q0, 0.0)
-  below = expansion_sign([*num_terms, *[-p for p in exact_product(q0, res)]]) < 0
-  q1 = q0 + 1.0
-  above = expansion_sign([*num_terms, *[-p for p in exact_product(q1, res)]]) >= 0
-  q = jnp.where(below, q0 - 1.0, jnp.where(above, q1, q0))
+  cands = jnp.stack([q0, q0 + 1.0])
+  terms = [jnp.stack([t, t]) for t in num_terms] + [-p for p in exact_product(cands, jnp.stack([res, res]))]
+  signs = expansion_sign(terms)
+  below, above = signs[0] < 0, signs[1] >= 0
+  q = jnp.where(below, q0 - 1.0, jnp.where(above, q0 + 1.0, q0))
   return q.astype(jnp.int32)
 
 
@@ -106,9 +114,8 @@ def trunc_div_exact(num_terms: Sequence[jax.Array], res: jax.Array) -> jax.Array
   """Exact trunc(sum / res) toward zero as int32 (C++ `static_cast<int>`)."""
   num_terms = [jnp.asarray(t, _F32) for t in num_terms]
   negative = expansion_sign(num_terms) < 0
-  pos = floor_div_exact(num_terms, res)
-  neg = -floor_div_exact([-t for t in num_terms], res)
-  return jnp.where(negative, neg, pos)
+  q = floor_div_exact([jnp.where(negative, -t, t) for t in num_terms], res)
+  return jnp.where(negative, -q, q)
 
 
 def world_to_cell(wx: jax.Array, wy: jax.Array, origin: jax.Array, resolution: jax.Array,
@@ -127,9 +134,10 @@ def world_to_cell(wx: jax.Array, wy: jax.Array, origin: jax.Array, resolution: j
   """
   wx = jnp.asarray(wx, _F32)
   wy = jnp.asarray(wy, _F32)
+  wx, wy = jnp.broadcast_arrays(wx, wy)
   ox, oy = origin[0].astype(_F32), origin[1].astype(_F32)
-  mx = floor_div_exact([wx, -ox], resolution)
-  my = floor_div_exact([wy, -oy], resolution)
+  o = jnp.stack([jnp.broadcast_to(ox, wx.shape), jnp.broadcast_to(oy, wx.shape)])
+  mx, my = floor_div_exact([jnp.stack([wx, wy]), -o], resolution)
   valid = ((wx >= ox) & (wy >= oy) & (mx < width) & (my < height)
            & jnp.isfinite(wx) & jnp.isfinite(wy))
   return (jnp.clip(mx, 0, width - 1), jnp.clip(my, 0, height - 1), valid)
@@ -157,3 +165,31 @@ def centres_to_cells(num_cells: int, origin: jax.Array, resolution: jax.Array,
   idx = floor_div_exact(terms, target_resolution)
   valid = (expansion_sign(terms) >= 0) & (idx < target_size)
   return jnp.clip(idx, 0, target_size - 1), valid
+
+
+def centres_to_cells_2d(shape: tuple[int, int], origin: jax.Array, resolution: jax.Array,
+                        target_origin: jax.Array, target_resolution: jax.Array,
+                        target_shape: tuple[int, int]):
+  """`centres_to_cells` for the columns and rows of a grid in one stacked division.
+
+  Args:
+    shape: (H, W) of the source grid; origin [2], resolution [] its geometry.
+    target_origin [2], target_resolution [], target_shape (Ht, Wt): the target grid.
+
+  Returns:
+    ((mx int32 [W], vx bool [W]), (my int32 [H], vy bool [H])).
+  """
+  h, w = shape
+  ht, wt = target_shape
+  n = max(h, w)
+  i = jnp.arange(n, dtype=_F32)
+  idx = jnp.stack([i, i])
+  o = jnp.stack([jnp.full((n,), origin[0], _F32), jnp.full((n,), origin[1], _F32)])
+  to = jnp.stack([jnp.full((n,), target_origin[0], _F32), jnp.full((n,), target_origin[1], _F32)])
+  terms = [o, *exact_product(2.0 * idx + 1.0, jnp.broadcast_to(0.5 * jnp.asarray(resolution, _F32), idx.shape)), -to]
+  cells = floor_div_exact(terms, target_resolution)
+  nonneg = expansion_sign(terms) >= 0
+  size = jnp.asarray([[wt], [ht]], jnp.int32)
+  valid = nonneg & (cells < size)
+  cells = jnp.clip(cells, 0, size - 1)
+  return (cells[0, :w], valid[0, :w]), (cells[1, :h], valid[1, :h])

@@ -158,14 +158,18 @@ def keepout_update_bounds_one(state, data, mask_origin, mask_res, pose, bounds,
 
 
 def _same_frame_window(shape_m, mask_origin, mask_res, origin, res, window):
-  """Nav2's same-frame overlap clip with the mask's half cell (spec §4.3)."""
+  """Nav2's same-frame overlap clip with the mask's half cell (spec §4.3).
+
+  The four worldToMapNoBounds calls run as one stacked exact division.
+  """
   hm, wm = shape_m
   half = 0.5 * mask_res
   min_i, min_j, max_i, max_j = window[0], window[1], window[2], window[3]
-  g0 = [geometry.trunc_div_exact([mask_origin[k], half, -origin[k]], res) for k in (0, 1)]
-  size = (wm, hm)
-  g1 = [geometry.trunc_div_exact([mask_origin[k], *geometry.exact_product(jnp.asarray(size[k], _F32), mask_res),
-                                  half, -origin[k]], res) for k in (0, 1)]
+  mo = jnp.stack([mask_origin[0], mask_origin[1], mask_origin[0], mask_origin[1]])
+  o = jnp.stack([origin[0], origin[1], origin[0], origin[1]])
+  extent = jnp.asarray([0.0, 0.0, wm, hm], _F32)       # corners (0, 0) and (Wm, Hm)
+  g = geometry.trunc_div_exact([mo, *geometry.exact_product(extent, mask_res), half, -o], res)
+  g0, g1 = (g[0], g[1]), (g[2], g[3])
   overlap = ~((g0[0] >= max_i) | (g0[1] >= max_j)) & ~((g1[0] <= min_i) | (g1[1] <= min_j))
   x0, y0 = jnp.maximum(min_i, g0[0]), jnp.maximum(min_j, g0[1])
   x1, y1 = jnp.minimum(max_i, g1[0]), jnp.minimum(max_j, g1[1])
@@ -197,8 +201,7 @@ def keepout_one(cost, origin, res, data, mask_origin, mask_res, state, window, e
   rows = jnp.arange(h, dtype=jnp.int32)
   if transform is None:
     overlap, (x0, y0, x1, y1) = _same_frame_window((hm, wm), mask_origin, mask_res, origin, res, window)
-    mx, vx = geometry.centres_to_cells(w, origin[0], res, mask_origin[0], mask_res, wm)
-    my, vy = geometry.centres_to_cells(h, origin[1], res, mask_origin[1], mask_res, hm)
+    (mx, vx), (my, vy) = geometry.centres_to_cells_2d((h, w), origin, res, mask_origin, mask_res, (hm, wm))
     visit = (((cols >= x0) & (cols < x1) & vx)[None, :] & ((rows >= y0) & (rows < y1) & vy)[:, None])
     mask_val = data[my[:, None], mx[None, :]]
   else:

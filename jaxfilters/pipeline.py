@@ -1,0 +1,118 @@
+"""Layers then filters, in Nav2's order (spec §2.5).
+
+`LayeredCostmap::updateMap` with filters: the *primary* map gets the plugins
+(static layer, obstacles, inflation), is copied into the *combined* map, and
+the filters run on the combined map only. So filter output is never inflated.
+`keepout_as_layer=True` models users who list the keepout filter under
+`plugins:` before the inflation layer (docs PR #972): it then runs on the
+primary map and its zones are inflated.
+
+The update window is the whole map each cycle (a full redraw), which is what a
+rolling local costmap and a freshly loaded global costmap do.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+
+import jax
+import jax.numpy as jnp
+
+from jaxfilters import constants
+from jaxfilters.inflation import InflationConfig, inflate
+from jaxfilters.keepout import KeepoutConfig, KeepoutState, keepout_filter
+from jaxfilters.speed import SpeedResult, SpeedState, speed_filter
+from jaxfilters.static_layer import StaticLayerConfig, static_layer
+from jaxfilters.types import Costmap, FilterMask, _dataclass
+
+
+@dataclasses.dataclass(frozen=True)
+class LayersConfig:
+  """Static pipeline configuration.
+
+  Attributes:
+    static: StaticLayerConfig for the occupancy -> cost conversion.
+    inflation: InflationConfig, or None for no inflation layer.
+    keepout: KeepoutConfig for the keepout filter.
+    keepout_as_layer: run keepout on the primary map before inflation.
+  """
+  static: StaticLayerConfig = StaticLayerConfig()
+  inflation: InflationConfig | None = None
+  keepout: KeepoutConfig = KeepoutConfig()
+  keepout_as_layer: bool = False
+
+  def __post_init__(self):
+    if not isinstance(self.static, StaticLayerConfig):
+      raise ValueError(f"static must be a StaticLayerConfig; got {type(self.static).__name__}")
+    if self.inflation is not None and not isinstance(self.inflation, InflationConfig):
+      raise ValueError(f"inflation must be an InflationConfig or None; got {type(self.inflation).__name__}")
+    if not isinstance(self.keepout, KeepoutConfig):
+      raise ValueError(f"keepout must be a KeepoutConfig; got {type(self.keepout).__name__}")
+
+
+@_dataclass
+class PipelineOutput:
+  """One costmap cycle.
+
+  Attributes:
+    primary: Costmap, layers only (what plugins see).
+    combined: Costmap, layers then filters (what planners and controllers see).
+    keepout_state: KeepoutState [B] or None.
+    speed_state: SpeedState [B] or None.
+    speed: SpeedResult [B] or None.
+  """
+  primary: Costmap
+  combined: Costmap
+  keepout_state: KeepoutState | None
+  speed_state: SpeedState | None
+  speed: SpeedResult | None
+
+
+def costmap_pipeline(static_data, origin, resolution, poses, *, config: LayersConfig,
+                     obstacles=None, keepout_mask: FilterMask | None = None,
+                     keepout_state: KeepoutState | None = None, speed_mask: FilterMask | None = None,
+                     speed_state: SpeedState | None = None, mask_index=None,
+                     enabled=None) -> PipelineOutput:
+  """Static layer (+ obstacles) -> inflation -> filters on the combined map.
+
+  Args:
+    static_data: int8 [B, H, W] occupancy under each robot's costmap.
+    origin: float [B, 2]; resolution: float [B] (must equal the inflation
+      config's resolution in float32).
+    poses: float [B, 3].
+    config: static LayersConfig.
+    obstacles: optional bool [B, H, W] marked lethal (obstacle layer: other
+      robots, sensor hits).
+    keepout_mask, keepout_state: keepout filter inputs (both or neither).
+    speed_mask, speed_state: speed filter inputs (both or neither).
+    mask_index, enabled: passed to the filters.
+
+  Returns:
+    PipelineOutput.
+  """
+  with jax.named_scope("costmap_pipeline"):
+    if (keepout_mask is None) != (keepout_state is None):
+      raise ValueError("keepout_mask and keepout_state go together; got only one of them")
+    if (speed_mask is None) != (speed_state is None):
+      raise ValueError("speed_mask and speed_state go together; got only one of them")
+    cost = static_layer(static_data, config=config.static)
+    if obstacles is not None:
+      obstacles = jnp.asarray(obstacles)
+      if obstacles.shape != cost.shape or obstacles.dtype != jnp.bool_:
+        raise ValueError(f"obstacles must be bool {tuple(cost.shape)}; got {obstacles.dtype}{tuple(obstacles.shape)}")
+      # ObstacleLayer uses max-combination: marking raises a cell to lethal.
+      cost = jnp.where(obstacles, jnp.uint8(constants.LETHAL_OBSTACLE), cost)
+    primary = Costmap(cost, jnp.asarray(origin, jnp.float32), jnp.asarray(resolution, jnp.float32))
+    if keepout_mask is not None and config.keepout_as_layer:
+      primary, keepout_state = keepout_filter(primary, keepout_mask, poses, keepout_state,
+                                              mask_index=mask_index, enabled=enabled, config=config.keepout)
+    if config.inflation is not None:
+      primary = inflate(primary, config=config.inflation)
+    combined = primary
+    if keepout_mask is not None and not config.keepout_as_layer:
+      combined, keepout_state = keepout_filter(primary, keepout_mask, poses, keepout_state,
+                                               mask_index=mask_index, enabled=enabled, config=config.keepout)
+    speed = None
+    if speed_mask is not None:
+      speed_state, speed = speed_filter(speed_mask, poses, speed_state, mask_index=mask_index, enabled=enabled)
+    return PipelineOutput(primary, combined, keepout_state, speed_state, speed)
