@@ -65,11 +65,19 @@ class KeepoutConfig:
     override_lethal_cost: escape mode; while the robot's centre is in a lethal
       keepout cell, every cell the filter writes gets `lethal_override_cost`.
     lethal_override_cost: clamped to [0, 252] like Nav2 (MAX_NON_OBSTACLE).
+    aligned_fast_path: let `keepout_filter` take the slice path (same integers,
+      see `_aligned_batch`) when, at run time, every robot's costmap
+      resolution equals its mask's resolution and no `transform` is given.
+      The choice is one batch-wide `lax.cond`, so both paths are compiled.
   """
   override_lethal_cost: bool = False
   lethal_override_cost: int = constants.MAX_NON_OBSTACLE
+  aligned_fast_path: bool = True
 
   def __post_init__(self):
+    if not isinstance(self.aligned_fast_path, (bool, np.bool_)):
+      raise ValueError(f"aligned_fast_path must be a bool; got {self.aligned_fast_path!r}")
+    object.__setattr__(self, "aligned_fast_path", bool(self.aligned_fast_path))
     if not isinstance(self.override_lethal_cost, (bool, np.bool_)):
       raise ValueError(f"override_lethal_cost must be a bool; got {self.override_lethal_cost!r}")
     if int(self.lethal_override_cost) != self.lethal_override_cost:
@@ -227,6 +235,90 @@ def keepout_one(cost, origin, res, data, mask_origin, mask_res, state, window, e
   return new_cost, new_state
 
 
+def mask_cost_plus_one_table() -> np.ndarray:
+  """uint8 [256]: entry v is (occ_to_cost(int8 v) + 1) mod 256, so unknown (255) -> 0."""
+  d = np.arange(256, dtype=np.uint8).view(np.int8).astype(np.int32)
+  cost = np.where((d >= 0) & (d <= 100), (d * 254 + 50) // 100, constants.NO_INFORMATION)
+  return ((cost + 1) % 256).astype(np.uint8)
+
+
+_COST1 = mask_cost_plus_one_table()
+
+
+def _aligned_one(cost, origin, res, table, i, mask_origin, mask_res, state, window, enabled,
+                 *, config: KeepoutConfig):
+  """keepout_one for a costmap whose resolution equals the mask's (same frame).
+
+  With res == mask_res (as float32 values) the real quotient for master cell k
+  is (origin - mask_origin) / res + 0.5 + k, so its exact floor is k0 + k with
+  k0 the exact floor for k = 0 (one scalar `floor_div_exact` per axis), and the
+  cell is on the mask iff 0 <= k0 + k < size. The mask cells are then a plain
+  [H, W] window: a `dynamic_slice` of `table`, the mask's (cost + 1) bytes
+  padded by H rows and W columns of 0 (= unknown, never written), so windows
+  partly or wholly off the mask read 0 there.
+
+  In uint8 with wrap-around, c1 = cost + 1 and m1 = mask cost + 1 map 255 to 0,
+  so Nav2's rule `mask != 255 and (mask > old or old == 255)` is `m1 > c1`,
+  and the written value max(c1, m1) - 1.
+
+  Args:
+    cost: uint8 [H, W]; origin [2], res []: the costmap.
+    table: uint8 [M, Hm + 2H, Wm + 2W] padded (cost + 1) masks; i: int32 [] the mask.
+    mask_origin, mask_res, state, window, enabled, config: as keepout_one.
+
+  Returns:
+    (new cost uint8 [H, W], new state).
+  """
+  h, w = cost.shape
+  hm, wm = table.shape[1] - 2 * h, table.shape[2] - 2 * w
+  overlap, (x0, y0, x1, y1) = _same_frame_window((hm, wm), mask_origin, mask_res, origin, res, window)
+  k0 = geometry.floor_div_exact(
+      [origin, *geometry.exact_product(jnp.ones((2,), _F32), 0.5 * res), -mask_origin], res)
+  sx = jnp.clip(k0[0], -w, wm) + w
+  sy = jnp.clip(k0[1], -h, hm) + h
+  m1 = jax.lax.dynamic_slice(table, (i, sy, sx), (1, h, w))[0]
+  run = enabled & overlap
+  cols = jnp.arange(w, dtype=jnp.int32)
+  rows = jnp.arange(h, dtype=jnp.int32)
+  visit = ((cols >= x0) & (cols < x1))[None, :] & ((rows >= y0) & (rows < y1) & run)[:, None]
+  m1 = jnp.where(visit, m1, jnp.uint8(0))
+  c1 = cost + jnp.uint8(1)
+  if config.override_lethal_cost:
+    value = jnp.where(state.is_pose_lethal, jnp.uint8(config.lethal_override_cost), m1 - jnp.uint8(1))
+    new_cost = jnp.where(m1 > c1, value, cost)
+  else:
+    new_cost = jnp.maximum(c1, m1) - jnp.uint8(1)
+  new_state = dataclasses.replace(
+      state, last_pose_lethal=jnp.where(run, state.is_pose_lethal, state.last_pose_lethal))
+  return new_cost, new_state
+
+
+def _aligned_batch(costmap, mask, idx, state, window, enabled, *, config: KeepoutConfig,
+                   loop: str = "auto"):
+  """The same-resolution keepout over a fleet (`_aligned_one` per robot).
+
+  `loop` "map" runs the robots with `lax.map` (each window a contiguous slice:
+  3.5x faster than the batched gather vmap makes of it on XLA:CPU), "vmap"
+  vectorises them (the GPU choice); "auto" picks "map" on the CPU backend.
+  """
+  h, w = costmap.cost.shape[1:]
+  table = jnp.asarray(_COST1)[jax.lax.bitcast_convert_type(mask.data, jnp.uint8).astype(jnp.int32)]
+  table = jnp.pad(table, ((0, 0), (h, h), (w, w)))
+  if loop == "auto":
+    loop = "map" if jax.default_backend() == "cpu" else "vmap"
+
+  def one(cost, origin, res, i, st, win, en):
+    return _aligned_one(cost, origin, res, table, i, mask.origin[i], mask.resolution[i], st, win, en,
+                        config=config)
+
+  args = (costmap.cost, costmap.origin, costmap.resolution, idx, state, window, enabled)
+  if loop == "map":
+    return jax.lax.map(lambda a: one(*a), args)
+  if loop != "vmap":
+    raise ValueError(f"loop must be 'auto', 'map' or 'vmap'; got {loop!r}")
+  return jax.vmap(one)(*args)
+
+
 def _batched_inputs(costmap, mask, poses, mask_index, enabled, window, transform):
   b = costmap.num_robots
   h, w = costmap.cost.shape[1:]
@@ -286,8 +378,18 @@ def keepout_filter(costmap: Costmap, mask: FilterMask, poses, state: KeepoutStat
                          st, win, en, tf, config=config)
 
     tf_axis = None if transform is None else 0
-    cost, new_state = jax.vmap(one, in_axes=(0, 0, 0, 0, 0, 0, 0, tf_axis))(
-        costmap.cost, costmap.origin, costmap.resolution, idx, state, window, enabled, transform)
+
+    def general(state):
+      return jax.vmap(one, in_axes=(0, 0, 0, 0, 0, 0, 0, tf_axis))(
+          costmap.cost, costmap.origin, costmap.resolution, idx, state, window, enabled, transform)
+
+    if transform is None and config.aligned_fast_path:
+      aligned = jnp.all(mask.resolution[idx] == costmap.resolution)
+      cost, new_state = jax.lax.cond(
+          aligned, lambda st: _aligned_batch(costmap, mask, idx, st, window, enabled, config=config),
+          general, state)
+    else:
+      cost, new_state = general(state)
     return dataclasses.replace(costmap, cost=cost), new_state
 
 

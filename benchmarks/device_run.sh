@@ -1,0 +1,39 @@
+#!/usr/bin/env bash
+# Run on the GPU machine from the repo root:  bash benchmarks/device_run.sh
+# Writes $OUT/gpu_tests.log and $OUT/bench.json; prints a summary table last.
+# Budget: well under 9 minutes on an H100 (tests ~1-2 min incl. compiles, bench ~3-4 min).
+set -u
+OUT="${OUT:-/tmp/out}"
+mkdir -p "$OUT"
+
+if [ -d .whl ] && ls .whl/*.whl >/dev/null 2>&1; then
+  python3 -m pip install -q --no-index --no-deps --no-compile --no-cache-dir --upgrade --target /tmp/site .whl/*.whl
+  export PYTHONPATH=/tmp/site:$PWD
+else
+  export PYTHONPATH=$PWD
+fi
+
+echo "== devices"
+nvidia-smi -L || true
+python3 -c 'import sys, jax; print("python", sys.version.split()[0], "jax", jax.__version__); print(jax.devices())'
+
+echo "== exact-arithmetic tests on the GPU (FMA contraction) -> $OUT/gpu_tests.log"
+timeout 240 python3 -m pytest -q -x tests/test_geometry.py tests/test_keepout.py tests/test_fast_paths.py \
+  -p no:cacheprovider > "$OUT/gpu_tests.log" 2>&1
+echo "pytest rc=$? ; tail:"; tail -n 5 "$OUT/gpu_tests.log"
+
+echo "== benchmarks (full sizes) -> $OUT/bench.json"
+timeout 330 python3 -m benchmarks --json --out "$OUT/bench.json" > /dev/null 2> "$OUT/bench.stderr"
+echo "bench rc=$?"
+
+echo "== summary"
+if [ -s "$OUT/bench.json" ]; then
+  python3 - "$OUT/bench.json" <<'PY'
+import json, sys
+r = json.load(open(sys.argv[1]))
+from benchmarks.run import table
+print(table(r))
+PY
+else
+  echo "no bench.json; stderr tail:"; tail -n 30 "$OUT/bench.stderr"
+fi

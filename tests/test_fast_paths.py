@@ -1,0 +1,107 @@
+"""Fast paths give the same integers as the general keepout path on random inputs.
+
+`KeepoutConfig(aligned_fast_path=True)` (the default) lets `keepout_filter` take
+the same-resolution slice path; `aligned_fast_path=False` always runs the
+general gather path. Both must agree bit for bit, with both batch loops.
+"""
+
+import dataclasses
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+import pytest
+
+from jaxfilters import keepout as ko
+from jaxfilters.grid import OccupancyGrid
+from jaxfilters.types import Costmap, FilterInfo, FilterMask
+from tests import reference
+
+KEEPOUT = FilterInfo.create(0)
+B, H, W, HM, WM = 6, 12, 16, 20, 18
+
+
+def _fleet(seed, *, same_res=True, num_masks=1):
+  rng = np.random.default_rng(seed)
+  res = np.float32(rng.choice([0.05, 0.1, 0.03, 1.0, 0.025]))
+  mres = res if same_res else np.float32(res * rng.choice([0.5, 2.0]))
+  # Values outside -1..100 (only reachable through with_data) are unknown to both paths.
+  data = rng.choice([-1, 0, 0, 1, 25, 50, 75, 99, 100, 100, 101, -128, 127], (num_masks, HM, WM)).astype(np.int8)
+  grids = [OccupancyGrid.create(np.clip(d, -1, 100), float(mres), tuple(rng.uniform(-20, 20, 2))) for d in data]
+  mask = FilterMask.create(grids, KEEPOUT).with_data(data)
+  morigin = np.asarray(mask.origin)[0]
+  # Origins on and off the mask grid, some windows partly or wholly off the mask.
+  k = rng.integers(-W - 4, WM + 4, (B, 2))
+  frac = np.where(rng.random((B, 1)) < 0.5, 0.0, rng.uniform(0, 1, (B, 2)))
+  origin = (morigin + (k + frac) * mres).astype(np.float32)
+  cost = rng.choice([0, 0, 10, 100, 200, 252, 253, 254, 255], (B, H, W)).astype(np.uint8)
+  cm = Costmap.create(cost, origin, res)
+  x0 = rng.integers(-2, W // 2, B)
+  y0 = rng.integers(-2, H // 2, B)
+  window = np.stack([x0, y0, x0 + rng.integers(1, W + 3, B), y0 + rng.integers(1, H + 3, B)], 1).astype(np.int32)
+  state = ko.KeepoutState.create(B)
+  state = dataclasses.replace(state, is_pose_lethal=jnp.asarray(rng.random(B) < 0.5))
+  mask_index = rng.integers(0, num_masks, B).astype(np.int32) if num_masks > 1 else None
+  enabled = jnp.asarray(rng.random(B) < 0.85)
+  return cm, mask, state, window, mask_index, enabled
+
+
+def _run(cm, mask, state, window, mask_index, enabled, config):
+  f = jax.jit(lambda cm, mask, st, win, en: ko.keepout_filter(
+      cm, mask, jnp.zeros((B, 3)), st, window=win, enabled=en, config=config,
+      mask_index=None if mask_index is None else jnp.asarray(mask_index)))
+  out, st = f(cm, mask, state, jnp.asarray(window), enabled)
+  return np.asarray(out.cost), np.asarray(st.last_pose_lethal)
+
+
+CONFIGS = [ko.KeepoutConfig(), ko.KeepoutConfig(override_lethal_cost=True, lethal_override_cost=200)]
+
+
+@pytest.mark.parametrize("seed", range(10))
+@pytest.mark.parametrize("cfg", CONFIGS, ids=["plain", "override"])
+def test_aligned_fast_path_equals_general_path(seed, cfg):
+  case = _fleet(seed, num_masks=1 + seed % 3)
+  fast = _run(*case, cfg)
+  slow = _run(*case, dataclasses.replace(cfg, aligned_fast_path=False))
+  np.testing.assert_array_equal(fast[0], slow[0])
+  np.testing.assert_array_equal(fast[1], slow[1])
+
+
+@pytest.mark.parametrize("seed", range(4))
+def test_fast_path_matches_float64_reference(seed):
+  cm, mask, state, window, mask_index, enabled = _fleet(100 + seed)
+  enabled = jnp.ones((B,), bool)
+  got, _ = _run(cm, mask, state, window, mask_index, enabled, ko.KeepoutConfig())
+  for b in range(B):
+    win = np.clip(window[b], 0, [W, H, W, H])
+    want, _ = reference.keepout_process(np.asarray(cm.cost[b]), np.asarray(cm.origin[b]), np.asarray(cm.resolution[b]),
+                                        np.asarray(mask.data[0]), np.asarray(mask.origin[0]),
+                                        np.asarray(mask.resolution[0]), win)
+    np.testing.assert_array_equal(got[b], want)
+
+
+@pytest.mark.parametrize("loop", ["map", "vmap"])
+@pytest.mark.parametrize("seed", range(4))
+def test_both_batch_loops_agree(seed, loop):
+  cm, mask, state, window, mask_index, enabled = _fleet(200 + seed, num_masks=2)
+  cfg = ko.KeepoutConfig(override_lethal_cost=bool(seed % 2), lethal_override_cost=100)
+  idx = jnp.asarray(mask_index)
+  win = jnp.asarray(window)
+  cost, st = jax.jit(lambda c, s: ko._aligned_batch(c, mask, idx, s, win, enabled, config=cfg, loop=loop))(cm, state)
+  want = _run(cm, mask, state, window, mask_index, enabled, dataclasses.replace(cfg, aligned_fast_path=False))
+  np.testing.assert_array_equal(np.asarray(cost), want[0])
+  np.testing.assert_array_equal(np.asarray(st.last_pose_lethal), want[1])
+
+
+@pytest.mark.parametrize("seed", range(3))
+def test_mixed_resolutions_fall_back_to_general_path(seed):
+  case = _fleet(300 + seed, same_res=False)
+  fast = _run(*case, ko.KeepoutConfig())
+  slow = _run(*case, ko.KeepoutConfig(aligned_fast_path=False))
+  np.testing.assert_array_equal(fast[0], slow[0])
+
+
+def test_cost_plus_one_table_is_occ_to_cost_plus_one():
+  v = np.arange(256, dtype=np.uint8).view(np.int8)
+  want = (np.asarray(ko.occ_to_cost(jnp.asarray(v))).astype(np.int32) + 1) % 256
+  np.testing.assert_array_equal(ko.mask_cost_plus_one_table(), want)
