@@ -186,12 +186,19 @@ def _same_frame_window(shape_m, mask_origin, mask_res, origin, res, window):
 
 def keepout_one(cost, origin, res, data, mask_origin, mask_res, state, window, enabled,
                 transform, *, config: KeepoutConfig):
+  return _keepout_stack_one(cost, origin, res, data[None], jnp.int32(0), mask_origin, mask_res, state,
+                            window, enabled, transform, config=config)
+
+
+def _keepout_stack_one(cost, origin, res, stack, i, mask_origin, mask_res, state, window, enabled,
+                       transform, *, config: KeepoutConfig):
   """KeepoutFilter::process for one robot's costmap (spec §4.3-§4.4).
 
   Args:
     cost: uint8 [H, W] the combined costmap.
     origin, res: float32 [2], [] its geometry.
-    data: int8 [Hm, Wm] this robot's mask.
+    data: int8 [Hm, Wm] this robot's mask (`keepout_one`); the private
+      `_keepout_stack_one` takes the [M, Hm, Wm] stack and the index i instead.
     mask_origin, mask_res: float32 [2], [].
     state: KeepoutState for this robot (scalar leaves).
     window: int32 [4] (min_i, min_j, max_i, max_j), half-open update window.
@@ -203,7 +210,11 @@ def keepout_one(cost, origin, res, data, mask_origin, mask_res, state, window, e
     (new cost uint8 [H, W], new state).
   """
   h, w = cost.shape
-  hm, wm = data.shape
+  hm, wm = stack.shape[1:]
+  # Gather from the flat [M * Hm * Wm] stack: one scalar index per cell, no per-robot
+  # copy of the mask (a 2-D index gather was 10x slower on XLA:CPU, benchmarks/NOTES.md).
+  flat = stack.reshape(-1)
+  base = i * (hm * wm)
   min_i, min_j, max_i, max_j = window[0], window[1], window[2], window[3]
   cols = jnp.arange(w, dtype=jnp.int32)
   rows = jnp.arange(h, dtype=jnp.int32)
@@ -211,7 +222,7 @@ def keepout_one(cost, origin, res, data, mask_origin, mask_res, state, window, e
     overlap, (x0, y0, x1, y1) = _same_frame_window((hm, wm), mask_origin, mask_res, origin, res, window)
     (mx, vx), (my, vy) = geometry.centres_to_cells_2d((h, w), origin, res, mask_origin, mask_res, (hm, wm))
     visit = (((cols >= x0) & (cols < x1) & vx)[None, :] & ((rows >= y0) & (rows < y1) & vy)[:, None])
-    mask_val = data[my[:, None], mx[None, :]]
+    mask_val = flat[base + my[:, None] * wm + mx[None, :]]
   else:
     overlap = jnp.asarray(True)
     cx = origin[0] + (cols.astype(_F32) + 0.5) * res
@@ -220,7 +231,7 @@ def keepout_one(cost, origin, res, data, mask_origin, mask_res, state, window, e
     mx, my, inside = geometry.world_to_cell(px, py, mask_origin, mask_res, wm, hm)
     in_window = (((cols >= min_i) & (cols < max_i))[None, :] & ((rows >= min_j) & (rows < max_j))[:, None])
     visit = inside & in_window
-    mask_val = data[my, mx]
+    mask_val = flat[base + my * wm + mx]
   mask_cost = occ_to_cost(mask_val)
   write = (visit & (mask_cost != constants.NO_INFORMATION)
            & ((mask_cost > cost) | (cost == constants.NO_INFORMATION)))
@@ -233,6 +244,9 @@ def keepout_one(cost, origin, res, data, mask_origin, mask_res, state, window, e
   new_state = dataclasses.replace(
       state, last_pose_lethal=jnp.where(run, state.is_pose_lethal, state.last_pose_lethal))
   return new_cost, new_state
+
+
+keepout_one.__doc__ = _keepout_stack_one.__doc__
 
 
 def mask_cost_plus_one_table() -> np.ndarray:
@@ -374,8 +388,8 @@ def keepout_filter(costmap: Costmap, mask: FilterMask, poses, state: KeepoutStat
     del poses
 
     def one(cost, origin, res, i, st, win, en, tf):
-      return keepout_one(cost, origin, res, mask.data[i], mask.origin[i], mask.resolution[i],
-                         st, win, en, tf, config=config)
+      return _keepout_stack_one(cost, origin, res, mask.data, i, mask.origin[i], mask.resolution[i],
+                                st, win, en, tf, config=config)
 
     tf_axis = None if transform is None else 0
 
