@@ -80,14 +80,14 @@ def test_fast_path_matches_float64_reference(seed):
     np.testing.assert_array_equal(got[b], want)
 
 
-@pytest.mark.parametrize("loop", ["map", "vmap"])
+@pytest.mark.parametrize("loop,packed", [("map", False), ("vmap", False), ("map", True), ("vmap", True)])
 @pytest.mark.parametrize("seed", range(4))
-def test_both_batch_loops_agree(seed, loop):
+def test_both_batch_loops_agree(seed, loop, packed):
   cm, mask, state, window, mask_index, enabled = _fleet(200 + seed, num_masks=2)
   cfg = ko.KeepoutConfig(override_lethal_cost=bool(seed % 2), lethal_override_cost=100)
   idx = jnp.asarray(mask_index)
   win = jnp.asarray(window)
-  cost, st = jax.jit(lambda c, s: ko._aligned_batch(c, mask, idx, s, win, enabled, config=cfg, loop=loop))(cm, state)
+  cost, st = jax.jit(lambda c, s: ko._aligned_batch(c, mask, idx, s, win, enabled, config=cfg, loop=loop, packed=packed))(cm, state)
   want = _run(cm, mask, state, window, mask_index, enabled, dataclasses.replace(cfg, aligned_fast_path=False))
   np.testing.assert_array_equal(np.asarray(cost), want[0])
   np.testing.assert_array_equal(np.asarray(st.last_pose_lethal), want[1])
@@ -105,3 +105,14 @@ def test_cost_plus_one_table_is_occ_to_cost_plus_one():
   v = np.arange(256, dtype=np.uint8).view(np.int8)
   want = (np.asarray(ko.occ_to_cost(jnp.asarray(v))).astype(np.int32) + 1) % 256
   np.testing.assert_array_equal(ko.mask_cost_plus_one_table(), want)
+
+
+@pytest.mark.parametrize("transform", [False, True])
+def test_chunked_general_path_equals_one_vmap(monkeypatch, transform):
+  cm, mask, state, window, mask_index, enabled = _fleet(400, same_res=False)
+  tf = jnp.asarray(np.float32(np.random.default_rng(1).uniform(-1, 1, (B, 3)))) if transform else None
+  run = lambda: np.asarray(ko.keepout_filter(cm, mask, jnp.zeros((B, 3)), state, window=jnp.asarray(window),
+                                             enabled=enabled, transform=tf)[0].cost)
+  whole = run()
+  monkeypatch.setattr(ko, "_GENERAL_CHUNK_CELLS", 2 * H * W)  # chunks of 2 robots, one remainder
+  np.testing.assert_array_equal(run(), whole)
