@@ -491,16 +491,13 @@ def keepout_filter(costmap: Costmap, mask: FilterMask, poses, state: KeepoutStat
     def general(state):
       args = (costmap.cost, costmap.origin, costmap.resolution, idx, state, window, enabled, transform)
       b, h, w = costmap.cost.shape
-      if b * h * w <= _GENERAL_CHUNK_CELLS:
+      # Only the SE2 path needs chunking: the same-frame gather fuses well and runs
+      # 2.4x faster as one vmap (H200: 172 vs 72 Gcell/s at B=16384, 200x200).
+      if transform is None or b * h * w <= _GENERAL_CHUNK_CELLS:
         return jax.vmap(one, in_axes=(0, 0, 0, 0, 0, 0, 0, tf_axis))(*args)
       # The per-cell exact arithmetic keeps ~40 float32 temporaries per cell alive at
       # once (an SE2 fleet of 655 M cells asked XLA:GPU for 107 GiB): run in chunks.
-      if transform is None:
-        f = lambda a: one(*a[:-1], None)
-        args = args[:-1] + (jnp.zeros((b,), _F32),)
-      else:
-        f = lambda a: one(*a)
-      return jax.lax.map(f, args, batch_size=max(1, _GENERAL_CHUNK_CELLS // (h * w)))
+      return jax.lax.map(lambda a: one(*a), args, batch_size=max(1, _GENERAL_CHUNK_CELLS // (h * w)))
 
     if transform is None and config.aligned_fast_path:
       aligned = jnp.all(mask.resolution[idx] == costmap.resolution)
