@@ -1,0 +1,256 @@
+"""`jaxfilters` command line: `jaxfilters fleet` (MJX fleet demo) and `jaxfilters bench`.
+
+    jaxfilters fleet --out out/demo                       # built-in warehouse, 16 robots, 120 s
+    jaxfilters fleet --map ../shared/maps/nav2/warehouse.yaml \\
+        --keepout ../shared/maps/nav2/warehouse_keepout.yaml \\
+        --speed ../shared/maps/nav2/warehouse_speed.yaml --robots 12 --seconds 90
+    jaxfilters bench [benchmark options]                  # benchmarks/run.py
+
+`fleet` writes OUT/summary.json, OUT/trajectories.png (map, zones, paths
+coloured by speed) and with --animate OUT/fleet.gif, and prints a summary
+table. It exits with status 2 if any robot entered a keepout cell or exceeded
+a speed zone's limit by more than the stated tolerance (disable with
+--no-check).
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import sys
+import time
+from pathlib import Path
+
+
+class _Progress:
+  """A text progress bar on stderr: redrawn in place on a terminal, a line per 10 % otherwise."""
+
+  def __init__(self, total: float, width: int = 30):
+    self.total, self.width = total, width
+    self.tty = sys.stderr.isatty()
+    self.last_decile = -1
+
+  def update(self, done: float, wall: float) -> None:
+    frac = 0.0 if self.total <= 0 else min(1.0, done / self.total)
+    bar = "#" * int(round(frac * self.width))
+    text = (f"[{bar:<{self.width}}] {100 * frac:5.1f}%  {done:7.1f}/{self.total:.1f} s simulated  "
+            f"{wall:6.1f} s wall")
+    if self.tty:
+      sys.stderr.write("\r" + text + ("\n" if frac >= 1.0 else ""))
+    elif int(frac * 10) > self.last_decile:
+      self.last_decile = int(frac * 10)
+      sys.stderr.write(text + "\n")
+    sys.stderr.flush()
+
+
+def _fleet_parser(sub) -> argparse.ArgumentParser:
+  p = sub.add_parser("fleet", help="simulate a robot fleet in MJX with speed and keepout filters",
+                     description="Simulate a fleet of differential-drive robots in MJX. Every velocity "
+                     "command is clipped by the Nav2 speed filter and keepout zones are never entered.")
+  p.add_argument("--robots", type=int, default=16, help="total robots (default 16)")
+  p.add_argument("--robots-per-world", type=int, default=None,
+                 help="robots sharing one warehouse (default: all of them up to 64, else the "
+                 "largest divisor of --robots up to 16); worlds are independent and batched")
+  g = p.add_mutually_exclusive_group()
+  g.add_argument("--seconds", type=float, default=None, help="simulated seconds (default 120)")
+  g.add_argument("--steps", type=int, default=None, help="env steps of 1/costmap_hz (0.2 s) each")
+  p.add_argument("--map", type=Path, default=None, help="Nav2 map YAML (default: built-in warehouse)")
+  p.add_argument("--keepout", type=Path, default=None, help="keepout mask YAML (Nav2 type 0)")
+  p.add_argument("--speed", type=Path, default=None, help="speed mask YAML")
+  p.add_argument("--speed-type", type=int, default=1, choices=(1, 2),
+                 help="speed mask type: 1 percent (default), 2 absolute m/s")
+  p.add_argument("--speed-base", type=float, default=100.0, help="speed mask base (default 100)")
+  p.add_argument("--speed-multiplier", type=float, default=-1.0, help="speed mask multiplier (default -1)")
+  p.add_argument("--seed", type=int, default=0, help="PRNG seed (default 0)")
+  p.add_argument("--out", type=Path, default=Path("out/fleet"), help="output folder (default out/fleet)")
+  p.add_argument("--animate", action="store_true", help="also write fleet.gif")
+  p.add_argument("--chunk-seconds", type=float, default=10.0,
+                 help="simulated seconds per jitted chunk (progress granularity; default 10)")
+  p.add_argument("--record-robots", type=int, default=64, help="robots drawn in the pictures (default 64)")
+  p.add_argument("--impl", choices=("jax", "warp"), default="jax", help="MJX implementation (default jax)")
+  p.add_argument("--no-check", action="store_true",
+                 help="exit 0 even with keepout entries or speed violations")
+  p.add_argument("--no-cache", action="store_true",
+                 help="do not use the persistent XLA compilation cache (~/.cache/jaxfilters/xla)")
+  return p
+
+
+def _enable_cache() -> None:
+  import jax
+  root = Path(os.environ.get("XDG_CACHE_HOME", Path.home() / ".cache")) / "jaxfilters" / "xla"
+  try:
+    root.mkdir(parents=True, exist_ok=True)
+  except OSError:
+    return
+  jax.config.update("jax_compilation_cache_dir", str(root))
+  jax.config.update("jax_persistent_cache_min_compile_time_secs", 1.0)
+
+
+def _table(summary: dict, header: str) -> str:
+  f = summary["fleet"]
+  lines = [header, f"{'zone':<10}{'limit':>12}{'time in zone':>16}{'max speed':>13}  compliant"]
+  for z in f["zones"]:
+    limit = "-" if z["limit_mps"] is None else f"{z['limit_mps']:.3f} m/s"
+    lines.append(f"{z['zone']:<10}{limit:>12}{z['time_s']:>14.1f} s{z['max_speed_mps']:>9.3f} m/s  "
+                 f"{'yes' if z['compliant'] else 'NO'}")
+  sep = "-" if f["min_separation_m"] is None else f"{f['min_separation_m']:.2f} m"
+  lines.append(f"distance {f['distance_m']:.1f} m | goals reached {f['goals_reached']} | "
+               f"keepout entries {f['keepout_entries']} | contacts {f['contacts']} | "
+               f"near misses {f['near_misses']} | min separation {sep} | "
+               f"stuck > {summary['config']['progress_timeout_s']:g} s: {f['stuck_events']} | "
+               f"emergency stops {f['emergency_stops']}")
+  lines.append(f"speed compliance (tolerance {f['speed_tolerance_mps']} m/s): "
+               f"{'PASS' if f['speed_compliant'] else 'FAIL'}; keepout: "
+               f"{'PASS' if f['keepout_entries'] == 0 and f['keepout_steps'] == 0 else 'FAIL'}")
+  return "\n".join(lines)
+
+
+def run_fleet(args) -> int:
+  t_start = time.perf_counter()
+  if not args.no_cache:
+    _enable_cache()
+  import jax
+  import numpy as np
+  from sims.config import FleetConfig
+  from sims.env import FleetEnv
+  from sims.metrics import summarize
+  from sims.render import render_gif, render_png
+  from sims.scenario import Scenario
+
+  if args.robots < 1:
+    raise SystemExit("--robots must be >= 1")
+  k = args.robots_per_world or (args.robots if args.robots <= 64 else
+                                max(d for d in range(1, 17) if args.robots % d == 0))
+  if args.robots % k:
+    raise SystemExit(f"--robots ({args.robots}) must be a multiple of --robots-per-world ({k})")
+  maps = (args.map, args.keepout, args.speed)
+  if any(m is not None for m in maps) and not all(m is not None for m in maps):
+    raise SystemExit("give all three of --map, --keepout and --speed (or none for the built-in warehouse)")
+  if args.map is None:
+    scenario = Scenario.default()
+  else:
+    scenario = Scenario.load(args.map, args.keepout, args.speed, speed_type=args.speed_type,
+                             speed_base=args.speed_base, speed_multiplier=args.speed_multiplier)
+  config = FleetConfig(robots_per_world=k, impl=args.impl)
+  num_worlds = args.robots // k
+  step_s = config.step_seconds
+  if args.steps is not None:
+    total_steps = max(1, args.steps)
+  else:
+    total_steps = max(1, int(round((120.0 if args.seconds is None else args.seconds) / step_s)))
+  chunk = max(1, min(total_steps, int(round(args.chunk_seconds / step_s))))
+  num_chunks = -(-total_steps // chunk)
+  total_steps = num_chunks * chunk
+
+  print(f"jaxfilters fleet: {scenario.name}, {args.robots} robots ({num_worlds} world(s) x {k}), "
+        f"{total_steps * step_s:g} s simulated, device {jax.devices()[0].device_kind}", file=sys.stderr)
+  t0 = time.perf_counter()
+  env = FleetEnv.create(scenario, config, seed=args.seed)
+  states = env.reset_fn()(env.params, env.world_keys(jax.random.PRNGKey(args.seed), num_worlds))
+  run = env.rollout_fn(chunk)
+  t1 = time.perf_counter()
+  compiled = run.compile(env.params, states)
+  compile_s = time.perf_counter() - t1
+  setup_s = t1 - t0
+  rec = min(args.record_robots, args.robots)
+  poses, speeds = [], []
+  t_run = time.perf_counter()
+  progress = _Progress(total_steps * step_s)
+  progress.update(0.0, time.perf_counter() - t_start)
+  for c in range(num_chunks):
+    states, frames = compiled(env.params, states)
+    poses.append(np.asarray(frames.pose).reshape(chunk, -1, 3)[:, :rec])
+    speeds.append(np.asarray(frames.speed).reshape(chunk, -1)[:, :rec])
+    progress.update((c + 1) * chunk * step_s, time.perf_counter() - t_start)
+  jax.block_until_ready(states)
+  run_s = time.perf_counter() - t_run
+
+  w = env.world
+  seconds = total_steps * step_s
+  summary = summarize(states.metrics, zone_labels=w.zone_labels, zone_limits=w.zone_limits,
+                      zone_speed=w.zone_speed, speed_tolerance=config.speed_tolerance, seconds=seconds)
+  summary["scenario"] = {
+      "name": scenario.name,
+      "map": str(args.map) if args.map else "built-in (sims/assets/default_map.yaml)",
+      "resolution_m": scenario.map.resolution, "size_cells": list(scenario.map.data.shape[::-1]),
+      "speed_filter": {"type": scenario.speed_type, "base": scenario.speed_base,
+                       "multiplier": scenario.speed_multiplier},
+      "stations": np.asarray(w.stations).round(3).tolist(),
+  }
+  summary["config"] = {
+      "robots": args.robots, "robots_per_world": k, "worlds": num_worlds, "seed": args.seed,
+      "controller_hz": config.controller_hz, "costmap_hz": config.costmap_hz,
+      "physics_dt_s": config.physics_dt, "robot_radius_m": config.robot.radius,
+      "max_speed_mps": config.robot.max_speed, "max_accel_mps2": config.robot.max_accel,
+      "local_costmap_m": config.local_costmap_size, "progress_timeout_s": config.progress_timeout,
+      "impl": config.impl,
+  }
+  summary["timing"] = {"setup_s": setup_s, "compile_s": compile_s, "run_s": run_s,
+                       "robot_steps_per_s": args.robots * total_steps * config.ticks_per_step
+                       * config.substeps_per_tick / run_s,
+                       "device": str(jax.devices()[0].device_kind)}
+  out = Path(args.out)
+  out.mkdir(parents=True, exist_ok=True)
+  (out / "summary.json").write_text(json.dumps(summary, indent=2))
+  pose = np.concatenate(poses)
+  speed = np.concatenate(speeds)
+  render_png(w, pose, speed, out / "trajectories.png")
+  written = [out / "summary.json", out / "trajectories.png"]
+  if args.animate:
+    written.append(render_gif(w, pose, speed, out / "fleet.gif", seconds_per_frame=step_s))
+  header = (f"{scenario.name}: {args.robots} robots, {seconds:g} s simulated in {run_s:.1f} s "
+            f"(setup {setup_s:.1f} s, compile {compile_s:.1f} s; "
+            f"{summary['timing']['robot_steps_per_s']:.3g} robot-steps/s)")
+  print(_table(summary, header))
+  print("wrote " + ", ".join(str(p) for p in written))
+  f = summary["fleet"]
+  ok = f["speed_compliant"] and f["keepout_entries"] == 0 and f["keepout_steps"] == 0
+  return 0 if ok or args.no_check else 2
+
+
+def run_bench(argv) -> int:
+  try:
+    from benchmarks import run as bench_run
+  except ImportError as e:
+    print(f"jaxfilters bench: the benchmark harness benchmarks/run.py could not be imported ({e}); "
+          "run from a checkout that has benchmarks/run.py", file=sys.stderr)
+    return 1
+  if not hasattr(bench_run, "main"):
+    print("jaxfilters bench: benchmarks/run.py has no main(argv)", file=sys.stderr)
+    return 1
+  return bench_run.main(argv) or 0
+
+
+FAST_COMPILE_FLAG = "--xla_cpu_use_fusion_emitters=false"
+
+
+def _fast_cpu_compile() -> None:
+  """Uses XLA:CPU's classic fusion emitters: the fleet step compiles ~35 % faster and runs as fast.
+
+  XLA reads XLA_FLAGS when its CPU backend starts, so this only takes effect
+  when called before JAX runs anything; a user's own setting is kept.
+  """
+  flags = os.environ.get("XLA_FLAGS", "")
+  if "xla_cpu_use_fusion_emitters" not in flags:
+    os.environ["XLA_FLAGS"] = (flags + " " + FAST_COMPILE_FLAG).strip()
+
+
+def main(argv=None) -> int:
+  """Entry point of the `jaxfilters` console script."""
+  argv = list(sys.argv[1:] if argv is None else argv)
+  _fast_cpu_compile()
+  if argv and argv[0] == "bench":
+    return run_bench(argv[1:])
+  parser = argparse.ArgumentParser(prog="jaxfilters", description=__doc__.splitlines()[0])
+  sub = parser.add_subparsers(dest="command", required=True)
+  _fleet_parser(sub)
+  sub.add_parser("bench", help="run the benchmark harness (benchmarks/run.py); options pass through")
+  args = parser.parse_args(argv)
+  if args.command == "fleet":
+    return run_fleet(args)
+  return run_bench([])
+
+
+if __name__ == "__main__":
+  sys.exit(main())

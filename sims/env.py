@@ -1,0 +1,406 @@
+"""The MJX fleet environment: one world's pure `reset(key)` / `step(state, action)`.
+
+A world is one warehouse with K = `robots_per_world` differential-drive robots
+(sims/assets/planar_robot.xml, one MJX model per robot, stepped with
+`jax.vmap` over K). Worlds are independent; a fleet of B = W * K robots is W
+worlds batched by one visible `jax.vmap` over `reset` and `step`
+(`FleetEnv.rollout_fn`), and rolled out with `lax.scan`.
+
+One `step` is one local-costmap period (1 / costmap_hz, 0.2 s by default):
+
+1. apply the action (goal overrides; -1 keeps the current goal);
+2. rebuild every robot's rolling local costmap (static layer, other robots,
+   inflation, keepout filter; sims/local_costmap.py);
+3. `lax.scan` over controller ticks (controller_hz, 20 Hz), each:
+   pose from MJX -> speed filter (its state carried) -> goals and progress
+   checker -> local planner on the local costmap, descending the shared
+   navigation field with the speed-zone lookahead (sims/planner.py) -> clip
+   linear (and optionally angular) velocity to the limit in force -> write ctrl
+   -> `lax.scan` over physics steps (mjx.step), accumulating metrics.
+
+All rates are static, so nothing inside a step branches on a traced counter
+(under `vmap` a `lax.cond` on batched data would run both branches).
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import functools
+from pathlib import Path
+
+import jax
+import jax.numpy as jnp
+import mujoco
+import numpy as np
+from mujoco import mjx
+
+from jaxfilters.keepout import KeepoutState
+from jaxfilters.speed import SpeedState, speed_filter
+from jaxfilters.types import Costmap, _dataclass
+from sims import local_costmap, metrics as metrics_lib, planner
+from sims.config import FleetConfig
+from sims.scenario import Scenario
+from sims.world import World, WorldParams, build_world
+
+_F32 = jnp.float32
+ROBOT_XML = Path(__file__).resolve().parent / "assets" / "planar_robot.xml"
+
+
+@_dataclass
+class WorldState:
+  """State of one world of K robots (every leaf gains a leading W under vmap).
+
+  Attributes:
+    data: mjx.Data batched over K robots (qpos = x, y, yaw).
+    cmd: float32 [K, 2], the last command (v m/s, w rad/s).
+    goal: int32 [K], station index of each robot's goal.
+    speed: SpeedState [K] of the speed filter.
+    speed_cap: float32 [K], speed limit in force (m/s; +inf = none).
+    keepout: KeepoutState [K] of the keepout filter.
+    local: Costmap [K] rolling local costmaps (uint8 [K, N, N]).
+    local_hard: uint8 [K, N, N], `planner.hard_cells` of each local costmap.
+    progress_anchor: float32 [K, 2], progress checker reference position.
+    progress_time: float32 [K], seconds since the robot last moved progress_radius.
+    blocked_time: float32 [K], seconds slower than 0.02 m/s away from the goal.
+    recovery_time: float32 [K], seconds of recovery mode left (planner).
+    in_keepout, in_contact, in_near: bool [K], flags for edge-counted metrics.
+    metrics: Metrics [K].
+    key: PRNG key (uint32 [2]).
+    time: float32 [], simulated seconds.
+  """
+  data: mjx.Data
+  cmd: jax.Array
+  goal: jax.Array
+  speed: SpeedState
+  speed_cap: jax.Array
+  keepout: KeepoutState
+  local: Costmap
+  local_hard: jax.Array
+  progress_anchor: jax.Array
+  progress_time: jax.Array
+  blocked_time: jax.Array
+  recovery_time: jax.Array
+  in_keepout: jax.Array
+  in_contact: jax.Array
+  in_near: jax.Array
+  metrics: metrics_lib.Metrics
+  key: jax.Array
+  time: jax.Array
+
+
+@_dataclass
+class Frame:
+  """What a rollout records per env step and robot (for plots and tests).
+
+  Attributes:
+    pose: float32 [..., K, 3] (x, y, yaw).
+    speed: float32 [..., K] linear speed (m/s).
+    cmd: float32 [..., K, 2] last command.
+    goal: int32 [..., K].
+    speed_cap: float32 [..., K] limit in force (m/s; +inf none).
+  """
+  pose: jax.Array
+  speed: jax.Array
+  cmd: jax.Array
+  goal: jax.Array
+  speed_cap: jax.Array
+
+
+def mjx_step(model: mjx.Model, data: mjx.Data, ctrl: jax.Array) -> mjx.Data:
+  """mjx.step of one robot with ctrl written first.
+
+  MJX broadcasts across ranks internally, so this traces with rank promotion
+  allowed even where a caller (e.g. the test suite) sets it to 'raise'.
+  """
+  with jax.numpy_rank_promotion("allow"):
+    return mjx.step(model, data.replace(ctrl=ctrl))
+
+
+def load_robot_model(config: FleetConfig) -> mujoco.MjModel:
+  """The shipped planar robot MJCF with the config's timestep and radius."""
+  m = mujoco.MjModel.from_xml_path(str(ROBOT_XML))
+  m.opt.timestep = config.physics_dt
+  gid = mujoco.mj_name2id(m, mujoco.mjtObj.mjOBJ_GEOM, "chassis")
+  m.geom_size[gid, 0] = config.robot.radius          # visual only: contacts are off
+  return m
+
+
+@dataclasses.dataclass(frozen=True, eq=False)
+class FleetEnv:
+  """Fleet environment over a built World.
+
+  Build with `FleetEnv.create(scenario, config)`. `reset` and `step` act on ONE
+  world; batch worlds with `jax.vmap`. The shared `params` are read from the
+  env; `rollout_fn` passes them to `jit` as an argument (not as constants).
+
+  Attributes:
+    world: the host World (maps, stations, zones) with its WorldParams.
+    mj_model: mujoco.MjModel of one robot.
+    mjx_model: mjx.Model on the device.
+    data0: mjx.Data template of one robot.
+    params: WorldParams used by reset/step (the world's, or tracers inside jit).
+  """
+  world: World
+  mj_model: mujoco.MjModel
+  mjx_model: mjx.Model
+  data0: mjx.Data
+  params: WorldParams
+
+  @classmethod
+  def create(cls, scenario: Scenario | None = None, config: FleetConfig = FleetConfig(), *,
+             seed: int = 0) -> "FleetEnv":
+    """Builds the world and the MJX model.
+
+    Args:
+      scenario: maps (default: the built-in warehouse).
+      config: fleet configuration.
+      seed: host seed for station and spawn selection.
+
+    Raises:
+      ValueError: impl 'warp' without a CUDA GPU, or a scenario problem (see build_world).
+    """
+    if config.impl == "warp" and not any(d.platform == "gpu" for d in jax.devices()):
+      raise ValueError("FleetConfig.impl='warp' needs a CUDA GPU and warp-lang "
+                       "(pip install 'mujoco-mjx[warp]'); use impl='jax' on CPU")
+    world = build_world(scenario or Scenario.default(), config, seed=seed)
+    m = load_robot_model(config)
+    mx = mjx.put_model(m, impl=config.impl)
+    d0 = mjx.make_data(m, impl=config.impl)          # the MjModel form works for every impl
+    return cls(world=world, mj_model=m, mjx_model=mx, data0=d0, params=world.params)
+
+  @property
+  def config(self) -> FleetConfig:
+    return self.world.config
+
+  @property
+  def num_robots(self) -> int:
+    """K, robots per world."""
+    return self.config.robots_per_world
+
+  @property
+  def zone_speeds(self) -> tuple[float, ...]:
+    """Extra planner speeds: 1 % under each finite zone limit, so zones are driven at their limit."""
+    return tuple(0.99 * v for v in self.world.zone_speed if np.isfinite(v))
+
+  def with_params(self, params: WorldParams) -> "FleetEnv":
+    return dataclasses.replace(self, params=params)
+
+  # ------------------------------------------------------------------ reset
+
+  def reset(self, key: jax.Array) -> WorldState:
+    """A fresh world: K robots at distinct spawn points with random yaw and goals.
+
+    Args:
+      key: PRNG key.
+
+    Returns:
+      WorldState of one world.
+    """
+    cfg, p, k = self.config, self.params, self.num_robots
+    k_spawn, k_yaw, k_goal, k_state = jax.random.split(key, 4)
+    num_spawns = p.spawns.shape[0]
+    num_stations = p.nav.stations.shape[0]
+    xy = p.spawns[jax.random.choice(k_spawn, num_spawns, (k,), replace=False)]
+    yaw = jax.random.uniform(k_yaw, (k,), _F32, -jnp.pi, jnp.pi)
+    qpos = jnp.concatenate([xy, yaw[:, None]], axis=1)
+    data = jax.vmap(lambda q: self.data0.replace(qpos=q))(qpos)
+    goal = jax.random.choice(k_goal, num_stations, (k,), replace=k > num_stations).astype(jnp.int32)
+    n = self.world.window_cells
+    local = Costmap(jnp.zeros((k, n, n), jnp.uint8), jnp.zeros((k, 2), _F32),
+                    jnp.full((k,), p.map_resolution, _F32))
+    false = jnp.zeros((k,), bool)
+    return WorldState(
+        data=data, cmd=jnp.zeros((k, 2), _F32), goal=goal, speed=SpeedState.create(k),
+        speed_cap=jnp.full((k,), jnp.inf, _F32), keepout=KeepoutState.create(k), local=local,
+        local_hard=jnp.ones((k, n, n), jnp.uint8),
+        progress_anchor=xy, progress_time=jnp.zeros((k,), _F32), blocked_time=jnp.zeros((k,), _F32),
+        recovery_time=jnp.zeros((k,), _F32), in_keepout=false,
+        in_contact=false, in_near=false,
+        metrics=metrics_lib.Metrics.zeros(k, self.world.num_zones), key=k_state,
+        time=jnp.zeros((), _F32))
+
+  # ------------------------------------------------------------------ step
+
+  def step(self, state: WorldState, action: jax.Array) -> WorldState:
+    """Advances one world by one local-costmap period.
+
+    Args:
+      state: WorldState of one world.
+      action: int32 [K] goal station per robot; -1 keeps the robot's goal.
+
+    Returns:
+      The next WorldState.
+    """
+    cfg, p = self.config, self.params
+    with jax.named_scope("fleet_step"):
+      action = jnp.asarray(action, jnp.int32)
+      override = action >= 0
+      poses = state.data.qpos[:, :3]
+      state = dataclasses.replace(
+          state, goal=jnp.where(override, action, state.goal),
+          progress_anchor=jnp.where(override[:, None], poses[:, :2], state.progress_anchor),
+          progress_time=jnp.where(override, 0.0, state.progress_time))
+      local, kstate = local_costmap.local_costmaps(
+          p.static_cost, p.map_origin, p.map_resolution, self.world.pad, p.keepout, poses,
+          state.keepout, n=self.world.window_cells, robot_radius=cfg.robot.radius,
+          inflation=self.world.inflation)
+      state = dataclasses.replace(state, local=local, keepout=kstate,
+                                  local_hard=jax.vmap(planner.hard_cells)(local.cost))
+      state, _ = jax.lax.scan(lambda s, _: (self._tick(s), None), state, None,
+                              length=cfg.ticks_per_step)
+      return dataclasses.replace(state, time=state.time + jnp.asarray(cfg.step_seconds, _F32))
+
+  def _pick_goals(self, key, goal, xy):
+    """A new random station per robot: not its current goal, not another robot's, > 2 m away."""
+    p = self.params
+    k = goal.shape[0]
+    s = p.nav.stations.shape[0]
+    ids = jnp.arange(s, dtype=jnp.int32)
+    others = ~jnp.eye(k, dtype=bool)
+    taken = jnp.any(others[:, :, None] & (goal[None, :, None] == ids[None, None, :]), axis=1)
+    far = jnp.linalg.norm(p.nav.stations[None, :, :] - xy[:, None, :], axis=-1) > 2.0
+    not_current = goal[:, None] != ids[None, :]
+    allowed = not_current & ~taken & far
+    allowed = jnp.where(jnp.any(allowed, axis=1, keepdims=True), allowed, not_current)
+    logits = jnp.where(allowed, 0.0, -jnp.inf)
+    return jax.vmap(jax.random.categorical)(jax.random.split(key, k), logits).astype(jnp.int32)
+
+  def _tick(self, s: WorldState) -> WorldState:
+    cfg, p = self.config, self.params
+    r = cfg.robot
+    k = self.num_robots
+    dt = cfg.control_dt
+    poses = s.data.qpos[:, :3]
+    key, k_goal = jax.random.split(s.key)
+
+    # Speed filter (Nav2 SpeedFilter::process at the robot pose; state carried).
+    speed_state, res = speed_filter(p.speed, poses, s.speed)
+    cap = planner.limit_to_speed(res.speed_limit, res.percentage, jnp.ones((k,), bool), r.max_speed)
+
+    # Goals and progress checker.
+    reached = jnp.linalg.norm(poses[:, :2] - p.nav.stations[s.goal], axis=-1) < cfg.planner.goal_tolerance
+    moved = jnp.linalg.norm(poses[:, :2] - s.progress_anchor, axis=-1) > cfg.progress_radius
+    ptime = jnp.where(moved, 0.0, s.progress_time + dt)
+    stuck = ptime > cfg.progress_timeout
+    new_goal = reached | stuck
+    goal = jnp.where(new_goal, self._pick_goals(k_goal, s.goal, poses[:, :2]), s.goal)
+    anchor = jnp.where((moved | new_goal)[:, None], poses[:, :2], s.progress_anchor)
+    ptime = jnp.where(new_goal, 0.0, ptime)
+    m = dataclasses.replace(s.metrics, goals_reached=s.metrics.goals_reached + reached.astype(jnp.int32),
+                            stuck_events=s.metrics.stuck_events + stuck.astype(jnp.int32))
+
+    # Recovery mode after being blocked (robot-robot deadlocks).
+    slow = jnp.linalg.norm(s.data.qvel[:, :2], axis=-1) < 0.02
+    blocked = jnp.where(slow & ~new_goal & (s.recovery_time <= 0), s.blocked_time + dt, 0.0)
+    start = blocked > cfg.planner.recovery_after
+    recovery = jnp.where(start, cfg.planner.recovery_duration, jnp.maximum(s.recovery_time - dt, 0.0))
+    blocked = jnp.where(start, 0.0, blocked)
+
+    # Local planner, then the hard clip to the limit in force.
+    plan = functools.partial(planner.plan_one, nav=p.nav, speed_mask=p.speed, speed_cap=p.speed_cap,
+                             config=cfg, extra_speeds=self.zone_speeds)
+    cmd, info = jax.vmap(plan, in_axes=(0, 0, 0, 0, 0, 0, 0, 0, 0, None, 0))(
+        poses, s.cmd, goal, cap, recovery > 0, s.local.cost, s.local_hard, s.local.origin,
+        s.local.resolution, poses[:, :2], ~jnp.eye(k, dtype=bool))
+    v = jnp.clip(cmd[:, 0], -cap, cap)
+    w = cmd[:, 1]
+    if cfg.limit_angular:
+      w_cap = r.max_yaw_rate * jnp.minimum(cap / r.max_speed, 1.0)
+      w = jnp.clip(w, -w_cap, w_cap)
+    cmd = jnp.stack([v, w], axis=1)
+    m = dataclasses.replace(m, emergency_stops=m.emergency_stops + info["stopped"].astype(jnp.int32))
+
+    # Physics.
+    def substep(carry, _):
+      data, m, in_k = carry
+      th = data.qpos[:, 2]
+      ctrl = jnp.stack([v * jnp.cos(th), v * jnp.sin(th), w], axis=1)
+      xy0 = data.qpos[:, :2]
+      data = jax.vmap(lambda d, u: mjx_step(self.mjx_model, d, u))(data, ctrl)
+      xy = data.qpos[:, :2]
+      speed = jnp.linalg.norm(data.qvel[:, :2], axis=-1)
+      zone = jax.vmap(lambda q: metrics_lib.zone_at(p.speed, p.zone_table, q))(xy)
+      kin = jax.vmap(lambda q: metrics_lib.in_keepout(p.keepout, q))(xy)
+      m, in_k = metrics_lib.physics_update(m, in_k, xy, jnp.linalg.norm(xy - xy0, axis=-1), speed,
+                                           zone, kin, cfg.physics_dt)
+      return (data, m, in_k), None
+
+    (data, m, in_k), _ = jax.lax.scan(substep, (s.data, m, s.in_keepout), None,
+                                      length=cfg.substeps_per_tick)
+    m, contact, near = metrics_lib.proximity_update(m, s.in_contact, s.in_near, data.qpos[:, :2],
+                                                   r.radius, cfg.near_miss_margin)
+    return dataclasses.replace(
+        s, data=data, cmd=cmd, goal=goal, speed=speed_state, speed_cap=cap, progress_anchor=anchor,
+        progress_time=ptime, blocked_time=blocked, recovery_time=recovery, in_keepout=in_k,
+        in_contact=contact, in_near=near, metrics=m, key=key)
+
+  # ------------------------------------------------------------------ batching
+
+  def frame(self, state: WorldState) -> Frame:
+    """The recorded view of one world's state."""
+    return Frame(pose=state.data.qpos[:, :3], speed=jnp.linalg.norm(state.data.qvel[:, :2], axis=-1),
+                 cmd=state.cmd, goal=state.goal, speed_cap=state.speed_cap)
+
+  def world_keys(self, key: jax.Array, num_worlds: int) -> jax.Array:
+    """Per-world keys fold_in(key, w): world w's key does not depend on num_worlds."""
+    return jax.vmap(lambda i: jax.random.fold_in(key, i))(jnp.arange(num_worlds))
+
+  def reset_fn(self):
+    """jit(vmap(reset)) over worlds: keys [W, 2] -> WorldState [W]."""
+    return jax.jit(lambda params, keys: jax.vmap(self.with_params(params).reset)(keys))
+
+  def rollout_fn(self, num_steps: int, *, record: bool = True) -> "Rollout":
+    """A jitted rollout of `num_steps` env steps over W worlds (`lax.scan` of `vmap(step)`).
+
+    `run(params, states, actions=None)` takes the WorldParams (a jit argument,
+    so maps are not baked into the program), states WorldState [W] and
+    optional actions int32 [num_steps, W, K] (None: no goal overrides). It
+    returns (final states, frames) with Frame leaves [num_steps, W, K, ...],
+    or None frames when record is False. Calling it again with new states of
+    the same shapes compiles nothing.
+    """
+    def run(params, states, actions):
+      env = self.with_params(params)
+
+      def body(s, a):
+        s = jax.vmap(env.step)(s, a)
+        return s, (jax.vmap(env.frame)(s) if record else None)
+
+      return jax.lax.scan(body, states, actions)
+
+    return Rollout(jax.jit(run), num_steps, self.num_robots)
+
+
+class Rollout:
+  """A jitted fleet rollout; `actions=None` is filled in on the host, so it never retraces.
+
+  Call it as `run(params, states, actions=None)`; `run.compile(params, states)`
+  compiles ahead of time (for timing) and returns a callable of the same form.
+  """
+
+  def __init__(self, jitted, num_steps: int, robots_per_world: int):
+    self.jitted = jitted
+    self.num_steps = num_steps
+    self.robots_per_world = robots_per_world
+    self._idle = {}
+
+  def _actions(self, states: WorldState, actions):
+    if actions is not None:
+      return actions
+    num_worlds = states.time.shape[0]
+    if num_worlds not in self._idle:
+      self._idle[num_worlds] = jnp.full((self.num_steps, num_worlds, self.robots_per_world), -1, jnp.int32)
+    return self._idle[num_worlds]
+
+  def __call__(self, params: WorldParams, states: WorldState, actions=None):
+    return self.jitted(params, states, self._actions(states, actions))
+
+  def lower(self, params: WorldParams, states: WorldState, actions=None):
+    return self.jitted.lower(params, states, self._actions(states, actions))
+
+  def compile(self, params: WorldParams, states: WorldState):
+    compiled = self.lower(params, states).compile()
+    return lambda params, states, actions=None: compiled(params, states, self._actions(states, actions))
+
+  def _cache_size(self) -> int:
+    return self.jitted._cache_size()

@@ -1,0 +1,204 @@
+"""Fleet metrics, accumulated inside the jitted step, and their host summary.
+
+Per robot (leading axis K inside one world, [W, K] over worlds):
+
+* distance travelled and goals reached;
+* time in each speed zone and the highest speed seen there (compliance: the
+  zone's limit in m/s plus `FleetConfig.speed_tolerance`), sampled every
+  physics step at the robot centre's speed-mask cell;
+* keepout: physics steps with the robot centre on a lethal keepout-mask cell,
+  and entries into one (both must stay 0);
+* robot-robot proximity at the controller rate: contacts (centres closer than
+  2 * radius) and near misses (closer than 2 * radius + near_miss_margin),
+  counted as events (rising edges) per robot, and the smallest separation;
+* stuck events: the progress checker (0.5 m in 10 s) failed;
+* emergency stops: ticks where every planner candidate was rejected.
+
+The per-step kernels are written for one world ([K] leaves); `summarize`
+turns the final [W, K] metrics into plain Python for summary.json.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+
+from jaxfilters import constants, geometry
+from jaxfilters.keepout import occ_to_cost
+from jaxfilters.types import FilterMask, _dataclass
+
+_F32 = jnp.float32
+
+
+@_dataclass
+class Metrics:
+  """Accumulated metrics of the K robots of one world.
+
+  Attributes:
+    distance: float32 [K], metres travelled.
+    goals_reached: int32 [K].
+    zone_time: float32 [K, Z], seconds in each speed zone (zone 0 = no limit).
+    zone_max_speed: float32 [K, Z], highest linear speed (m/s) seen in each zone.
+    keepout_steps: int32 [K], physics steps with the centre on a keepout cell.
+    keepout_entries: int32 [K], entries into a keepout cell.
+    contacts: int32 [K], contact events with another robot.
+    near_misses: int32 [K], near-miss events.
+    min_separation: float32 [K], smallest centre distance to another robot (m).
+    stuck_events: int32 [K], progress-checker failures.
+    emergency_stops: int32 [K], ticks with no admissible candidate.
+  """
+  distance: jax.Array
+  goals_reached: jax.Array
+  zone_time: jax.Array
+  zone_max_speed: jax.Array
+  keepout_steps: jax.Array
+  keepout_entries: jax.Array
+  contacts: jax.Array
+  near_misses: jax.Array
+  min_separation: jax.Array
+  stuck_events: jax.Array
+  emergency_stops: jax.Array
+
+  @classmethod
+  def zeros(cls, num_robots: int, num_zones: int) -> "Metrics":
+    k, z = num_robots, num_zones
+    i = jnp.zeros((k,), jnp.int32)
+    return cls(distance=jnp.zeros((k,), _F32), goals_reached=i, zone_time=jnp.zeros((k, z), _F32),
+               zone_max_speed=jnp.zeros((k, z), _F32), keepout_steps=i, keepout_entries=i,
+               contacts=i, near_misses=i, min_separation=jnp.full((k,), jnp.inf, _F32),
+               stuck_events=i, emergency_stops=i)
+
+
+def zone_at(speed_mask: FilterMask, zone_table: jax.Array, xy: jax.Array) -> jax.Array:
+  """Speed zone id (int32) at one point: the robot centre's mask cell; 0 off the mask."""
+  _, h, w = speed_mask.data.shape
+  mx, my, valid = geometry.world_to_cell(xy[0], xy[1], speed_mask.origin[0], speed_mask.resolution[0], w, h)
+  byte = jax.lax.bitcast_convert_type(speed_mask.data[0, my, mx], jnp.uint8).astype(jnp.int32)
+  return jnp.where(valid, zone_table[byte], 0)
+
+
+def in_keepout(keepout_mask: FilterMask, xy: jax.Array) -> jax.Array:
+  """bool: the point's keepout-mask cell is lethal (Nav2's "pose in keepout", spec §4.2)."""
+  _, h, w = keepout_mask.data.shape
+  mx, my, valid = geometry.world_to_cell(xy[0], xy[1], keepout_mask.origin[0],
+                                         keepout_mask.resolution[0], w, h)
+  return valid & (occ_to_cost(keepout_mask.data[0, my, mx]) >= constants.INSCRIBED_INFLATED_OBSTACLE)
+
+
+def physics_update(m: Metrics, prev_in_keepout: jax.Array, xy: jax.Array, step_len: jax.Array,
+                   speed: jax.Array, zone: jax.Array, keepout: jax.Array, dt: float
+                   ) -> tuple[Metrics, jax.Array]:
+  """Accumulates one physics step for K robots.
+
+  Args:
+    m: Metrics [K]; prev_in_keepout: bool [K].
+    xy: float32 [K, 2] (unused beyond shape checks); step_len: float32 [K] metres moved.
+    speed: float32 [K] linear speed (m/s); zone: int32 [K]; keepout: bool [K].
+    dt: physics timestep (s).
+
+  Returns:
+    (new Metrics, new in_keepout flags).
+  """
+  del xy
+  z = m.zone_time.shape[1]
+  onehot = jax.nn.one_hot(zone, z, dtype=_F32)                          # [K, Z]
+  return dataclasses.replace(
+      m,
+      distance=m.distance + step_len,
+      zone_time=m.zone_time + dt * onehot,
+      zone_max_speed=jnp.maximum(m.zone_max_speed, jnp.where(onehot > 0, speed[:, None], 0.0)),
+      keepout_steps=m.keepout_steps + keepout.astype(jnp.int32),
+      keepout_entries=m.keepout_entries + (keepout & ~prev_in_keepout).astype(jnp.int32),
+  ), keepout
+
+
+def proximity_update(m: Metrics, prev_contact: jax.Array, prev_near: jax.Array, xy: jax.Array,
+                     radius: float, near_margin: float):
+  """Accumulates robot-robot proximity for K robots at one instant.
+
+  Args:
+    m: Metrics [K]; prev_contact, prev_near: bool [K] flags of the last check.
+    xy: float32 [K, 2] robot positions.
+    radius: robot radius (m); near_margin: m.
+
+  Returns:
+    (new Metrics, contact flags bool [K], near flags bool [K]).
+  """
+  k = xy.shape[0]
+  d = jnp.linalg.norm(xy[:, None, :] - xy[None, :, :], axis=-1)
+  d = jnp.where(jnp.eye(k, dtype=bool), jnp.inf, d)
+  nearest = jnp.min(d, axis=1)
+  contact = nearest < 2.0 * radius
+  near = nearest < 2.0 * radius + near_margin
+  return dataclasses.replace(
+      m,
+      contacts=m.contacts + (contact & ~prev_contact).astype(jnp.int32),
+      near_misses=m.near_misses + (near & ~prev_near).astype(jnp.int32),
+      min_separation=jnp.minimum(m.min_separation, nearest),
+  ), contact, near
+
+
+def summarize(metrics: Metrics, *, zone_labels, zone_limits, zone_speed, speed_tolerance: float,
+              seconds: float) -> dict:
+  """Host summary of final metrics.
+
+  Args:
+    metrics: Metrics with leaves [W, K, ...] (worlds, robots per world).
+    zone_labels, zone_limits, zone_speed: per zone (World fields).
+    speed_tolerance: m/s allowed above a zone's limit (physics lag).
+    seconds: simulated time.
+
+  Returns:
+    A JSON-ready dict: 'fleet' totals and compliance per zone, and 'robots'
+    (one dict per robot, world-major order). Contacts and near misses are
+    robot-events (a pair coming into contact counts once for each robot).
+  """
+  m = jax.tree.map(lambda a: np.asarray(a).reshape((-1,) + np.shape(a)[2:]), metrics)
+  b = m.distance.shape[0]
+  zones = []
+  for z, label in enumerate(zone_labels):
+    limit = float(zone_speed[z])
+    top = float(m.zone_max_speed[:, z].max()) if b else 0.0
+    zones.append({
+        "zone": label, "limit": float(zone_limits[z]),
+        "limit_mps": None if not np.isfinite(limit) else limit,
+        "time_s": float(m.zone_time[:, z].sum()),
+        "max_speed_mps": top,
+        "compliant": bool(not np.isfinite(limit) or top <= limit + speed_tolerance),
+    })
+  sep = m.min_separation[np.isfinite(m.min_separation)]
+  fleet = {
+      "robots": int(b), "seconds": float(seconds),
+      "distance_m": float(m.distance.sum()),
+      "goals_reached": int(m.goals_reached.sum()),
+      "keepout_steps": int(m.keepout_steps.sum()),
+      "keepout_entries": int(m.keepout_entries.sum()),
+      "contacts": int(m.contacts.sum()),
+      "near_misses": int(m.near_misses.sum()),
+      "min_separation_m": float(sep.min()) if sep.size else None,
+      "stuck_events": int(m.stuck_events.sum()),
+      "robots_stuck": int((m.stuck_events > 0).sum()),
+      "emergency_stops": int(m.emergency_stops.sum()),
+      "speed_tolerance_mps": float(speed_tolerance),
+      "speed_compliant": all(zn["compliant"] for zn in zones),
+      "zones": zones,
+  }
+  robots = []
+  for i in range(b):
+    robots.append({
+        "robot": i,
+        "distance_m": float(m.distance[i]),
+        "goals_reached": int(m.goals_reached[i]),
+        "zone_time_s": {label: float(m.zone_time[i, z]) for z, label in enumerate(zone_labels)},
+        "zone_max_speed_mps": {label: float(m.zone_max_speed[i, z]) for z, label in enumerate(zone_labels)},
+        "keepout_entries": int(m.keepout_entries[i]),
+        "contacts": int(m.contacts[i]),
+        "near_misses": int(m.near_misses[i]),
+        "min_separation_m": float(m.min_separation[i]) if np.isfinite(m.min_separation[i]) else None,
+        "stuck_events": int(m.stuck_events[i]),
+        "emergency_stops": int(m.emergency_stops[i]),
+    })
+  return {"fleet": fleet, "robots": robots}

@@ -1,0 +1,260 @@
+"""Shared world data: the global costmap, navigation field, stations and zone tables.
+
+`build_world(scenario, config)` does the once-per-scenario work:
+
+1. global costmap = static layer -> keepout filter -> inflation, all with
+   jaxfilters. The keepout is applied *before* inflation (as Nav2 users do who
+   list the keepout filter under `plugins:`), so keepout zones are inflated and
+   no global route passes next to one;
+2. a coarser navigation grid (`navigation.pool_costmap`) keeps every
+   keepout, obstacle, inscribed and unknown cell blocked;
+3. goal stations (far from obstacles, in the largest connected free region,
+   spread by farthest-point sampling) and spawn points (a 1 m lattice);
+4. the navigation field of every station (`navigation.distance_field`);
+5. a speed-zone table: zone 0 is "no limit" (mask value 0, off-mask or
+   unknown), zones 1..Z-1 are the distinct limits of the speed mask.
+
+The device part, `WorldParams`, is one pytree shared (not batched) by every
+world and robot; nothing in it is per robot, so its size does not grow with B.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import functools
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+
+from jaxfilters import constants
+from jaxfilters.inflation import InflationConfig, inflate
+from jaxfilters.keepout import KeepoutState, keepout_filter
+from jaxfilters.static_layer import StaticLayerConfig, static_layer
+from jaxfilters.types import Costmap, FilterInfo, FilterMask, _dataclass
+from sims import navigation
+from sims.config import FleetConfig
+from sims.scenario import Scenario, speed_limit_host
+
+STATIC_LAYER = StaticLayerConfig(track_unknown_space=True)
+SPAWN_SPACING = 1.0  # m, lattice of spawn points (robots start at least ~0.9 m apart)
+
+
+@_dataclass
+class WorldParams:
+  """Device data every world shares (closed over by the env, passed to jit as an argument).
+
+  Attributes:
+    static_cost: uint8 [H + 2P, W + 2P], the static layer padded by P cells of
+      NO_INFORMATION, so a rolling window is a plain dynamic slice.
+    map_origin: float32 [2], origin of the unpadded static map.
+    map_resolution: float32 [], static map (and local costmap) resolution.
+    keepout: FilterMask (M = 1), Nav2 type 0.
+    speed: FilterMask (M = 1), type 1 or 2.
+    zone_table: int32 [256], zone id by speed-mask byte (int8 value read as uint8).
+    zone_speed: float32 [Z], speed limit of each zone in m/s (+inf: no limit).
+    speed_cap: float32 [Hs, Ws], on the speed mask's grid: the strictest
+      speed-mask limit (m/s; +inf none or unknown) of each cell and its 8
+      neighbours. The per-cell limit is what `jaxfilters.speed.speed_limit_at_one`
+      returns at the cell (Nav2's rule, converted to m/s once); the one-cell
+      dilation makes the planner's sampled lookahead conservative, so a rollout
+      sampled every half cell cannot clip a zone corner between two samples.
+    nav: NavField with S stations.
+    spawns: float32 [P, 2], spawn points.
+  """
+  static_cost: jax.Array
+  map_origin: jax.Array
+  map_resolution: jax.Array
+  keepout: FilterMask
+  speed: FilterMask
+  zone_table: jax.Array
+  zone_speed: jax.Array
+  speed_cap: jax.Array
+  nav: navigation.NavField
+  spawns: jax.Array
+
+
+@dataclasses.dataclass(frozen=True, eq=False)
+class World:
+  """Host view of a built world (what reports and plots need) plus its WorldParams.
+
+  Attributes:
+    scenario, config: what it was built from.
+    params: the device pytree.
+    global_cost: uint8 [H, W], static + keepout + inflation.
+    inflation: InflationConfig of both costmaps.
+    window_cells: N, the local costmap is N x N cells at the map resolution.
+    pad: P, padding of params.static_cost.
+    nav_factor: map cells per navigation cell.
+    zone_labels: one label per zone ("none", "50%", "0.3 m/s").
+    zone_limits: raw limit per zone (percent or m/s; 0.0 for zone 0).
+    zone_speed: m/s per zone (inf for zone 0).
+    stations: float [S, 2]; spawns: float [P, 2].
+  """
+  scenario: Scenario
+  config: FleetConfig
+  params: WorldParams
+  global_cost: np.ndarray
+  inflation: InflationConfig
+  window_cells: int
+  pad: int
+  nav_factor: int
+  zone_labels: tuple[str, ...]
+  zone_limits: tuple[float, ...]
+  zone_speed: tuple[float, ...]
+  stations: np.ndarray
+  spawns: np.ndarray
+
+  @property
+  def num_zones(self) -> int:
+    return len(self.zone_labels)
+
+
+def inflation_config(resolution: float, config: FleetConfig) -> InflationConfig:
+  return InflationConfig.from_footprint(
+      resolution=resolution, robot_radius=config.robot.radius,
+      footprint_padding=config.robot.footprint_padding, inflation_radius=config.inflation_radius,
+      cost_scaling_factor=config.cost_scaling_factor)
+
+
+@functools.partial(jax.jit, static_argnames=("infl",))
+def _global_costmap(data, origin, resolution, keepout: FilterMask, *, infl: InflationConfig):
+  static = static_layer(data[None], config=STATIC_LAYER)
+  cm = Costmap(static, origin[None], resolution[None])
+  cm, _ = keepout_filter(cm, keepout, jnp.zeros((1, 3), jnp.float32), KeepoutState.create(1))
+  return inflate(cm.cost, config=infl)[0]
+
+
+def global_costmap(scenario: Scenario, keepout: FilterMask, infl: InflationConfig) -> np.ndarray:
+  """Static layer, then the keepout filter as a plugin, then inflation (uint8 [H, W])."""
+  grid = scenario.map
+  return np.asarray(_global_costmap(jnp.asarray(grid.data), jnp.asarray(np.float32(grid.origin[:2])),
+                                    jnp.asarray(np.float32(grid.resolution)), keepout, infl=infl))
+
+
+def _zone_tables(scenario: Scenario, max_speed: float):
+  """Zones of the speed mask: (table [256], labels, raw limits, m/s)."""
+  values = np.unique(scenario.speed.data.astype(np.int32))
+  limits = {}
+  for d in values:
+    lim, valid = speed_limit_host(int(d), scenario.speed_type, scenario.speed_base,
+                                  scenario.speed_multiplier)
+    limits[int(d)] = lim if valid else 0.0
+  distinct = sorted({v for v in limits.values() if v != 0.0}, reverse=True)
+  percent = scenario.speed_type == constants.SPEED_FILTER_PERCENT
+  table = np.zeros(256, np.int32)
+  for d, lim in limits.items():
+    table[d & 0xFF] = 0 if lim == 0.0 else 1 + distinct.index(lim)
+  labels = ("none",) + tuple(f"{v:g}%" if percent else f"{v:g} m/s" for v in distinct)
+  speeds = (np.inf,) + tuple(max_speed * v / 100.0 if percent else v for v in distinct)
+  return table, labels, (0.0,) + tuple(distinct), speeds
+
+
+def dilate_min(a: np.ndarray) -> np.ndarray:
+  """Minimum over each cell's 3 x 3 neighbourhood (edges replicate), host NumPy."""
+  p = np.pad(a, 1, mode="edge")
+  h, w = a.shape
+  return np.min([p[i:i + h, j:j + w] for i in range(3) for j in range(3)], axis=0)
+
+
+def _farthest_points(xy: np.ndarray, k: int, rng: np.random.Generator) -> np.ndarray:
+  """Indices of k points of xy [N, 2] spread by farthest-point sampling."""
+  chosen = [int(rng.integers(len(xy)))]
+  d = np.linalg.norm(xy - xy[chosen[0]], axis=1)
+  for _ in range(1, k):
+    i = int(np.argmax(d))
+    chosen.append(i)
+    d = np.minimum(d, np.linalg.norm(xy - xy[i], axis=1))
+  return np.asarray(chosen)
+
+
+def build_world(scenario: Scenario, config: FleetConfig, *, seed: int = 0) -> World:
+  """Builds the shared world data for a scenario and fleet config.
+
+  Args:
+    scenario: the maps.
+    config: the fleet config (robot size, inflation, navigation grid, stations).
+    seed: host seed for station and spawn selection (deterministic).
+
+  Returns:
+    World with its WorldParams.
+
+  Raises:
+    ValueError: masks whose resolution differs from the map's, too little free
+      space for the stations, or fewer spawn points than robots per world.
+  """
+  grid = scenario.map
+  res = float(grid.resolution)
+  for name, mask in (("keepout", scenario.keepout), ("speed", scenario.speed)):
+    if not np.isclose(mask.resolution, res):
+      raise ValueError(f"the {name} mask resolution ({mask.resolution}) must equal the map "
+                       f"resolution ({res}): the planner samples masks at half-cell spacing")
+  infl = inflation_config(res, config)
+  keepout = FilterMask.create(scenario.keepout, FilterInfo.create(constants.KEEPOUT_FILTER))
+  speed = FilterMask.create(scenario.speed, FilterInfo.create(
+      scenario.speed_type, scenario.speed_base, scenario.speed_multiplier))
+  cost = global_costmap(scenario, keepout, infl)
+
+  # Navigation grid.
+  factor = max(1, int(round(config.nav_resolution / res)))
+  blocked, weight = navigation.pool_costmap(cost, factor)
+  nav_res = factor * res
+  weight_m = np.where(blocked, np.inf, weight * np.float32(nav_res)).astype(np.float32)
+  ox, oy = float(grid.origin[0]), float(grid.origin[1])
+  # Station and spawn candidates: coarse cells whose fine cells are all cost 0 (clear of
+  # the inflation radius around obstacles and keepout zones).
+  clear = (~blocked) & (weight == 1.0)
+  cr, cc = np.nonzero(clear)
+  if len(cr) < config.num_stations:
+    raise ValueError(f"the map has {len(cr)} clear navigation cells; need at least "
+                     f"num_stations = {config.num_stations}")
+  rng = np.random.default_rng(seed)
+  # Largest connected region: the seed that reaches the most clear cells (num_stations
+  # seeds, so this and the final field share one compiled shape).
+  seeds = rng.choice(len(cr), size=config.num_stations, replace=False)
+  reach = np.isfinite(np.asarray(navigation.distance_field(
+      jnp.asarray(weight_m), jnp.asarray(cr[seeds], jnp.int32), jnp.asarray(cc[seeds], jnp.int32))))
+  best = int(np.argmax([reach[i][cr, cc].sum() for i in range(len(seeds))]))
+  ok = reach[best][cr, cc]
+  cr, cc = cr[ok], cc[ok]
+  centres = np.stack([ox + (cc + 0.5) * nav_res, oy + (cr + 0.5) * nav_res], axis=1)
+  if len(cr) < config.num_stations:
+    raise ValueError(f"the largest free region has {len(cr)} clear cells; need num_stations = "
+                     f"{config.num_stations}")
+  pick = _farthest_points(centres, config.num_stations, rng)
+  stations = centres[pick].astype(np.float32)
+  dist = navigation.distance_field(jnp.asarray(weight_m), jnp.asarray(cr[pick], jnp.int32),
+                                   jnp.asarray(cc[pick], jnp.int32))
+  # Spawn lattice: the clear reachable cell containing each lattice point.
+  lattice = np.zeros_like(clear)
+  lattice[cr, cc] = True
+  step = max(1, int(round(SPAWN_SPACING / nav_res)))
+  keep = np.zeros_like(clear)
+  keep[step // 2::step, step // 2::step] = True
+  sr, sc = np.nonzero(lattice & keep)
+  spawns = np.stack([ox + (sc + 0.5) * nav_res, oy + (sr + 0.5) * nav_res], axis=1).astype(np.float32)
+  if len(spawns) < config.robots_per_world:
+    raise ValueError(f"the map has {len(spawns)} spawn points ({SPAWN_SPACING} m lattice); need "
+                     f"robots_per_world = {config.robots_per_world} or fewer robots per world")
+
+  n = int(round(config.local_costmap_size / res))
+  pad = n
+  static = np.asarray(static_layer(jnp.asarray(grid.data), config=STATIC_LAYER))
+  padded = np.pad(static, pad, constant_values=constants.NO_INFORMATION)
+  table, labels, raw_limits, speeds = _zone_tables(scenario, config.robot.max_speed)
+  cell_speed = np.asarray(speeds, np.float32)[table[scenario.speed.data.astype(np.uint8)]]
+  params = WorldParams(
+      static_cost=jnp.asarray(padded),
+      map_origin=jnp.asarray(np.float32([ox, oy])),
+      map_resolution=jnp.asarray(np.float32(res)),
+      keepout=keepout, speed=speed,
+      zone_table=jnp.asarray(table),
+      zone_speed=jnp.asarray(np.asarray(speeds, np.float32)),
+      speed_cap=jnp.asarray(dilate_min(cell_speed)),
+      nav=navigation.NavField(dist=dist, origin=jnp.asarray(np.float32([ox, oy])),
+                              resolution=jnp.asarray(np.float32(nav_res)),
+                              stations=jnp.asarray(stations)),
+      spawns=jnp.asarray(spawns))
+  return World(scenario=scenario, config=config, params=params, global_cost=cost, inflation=infl,
+               window_cells=n, pad=pad, nav_factor=factor, zone_labels=labels,
+               zone_limits=raw_limits, zone_speed=speeds, stations=stations, spawns=spawns)
