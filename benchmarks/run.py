@@ -39,9 +39,9 @@ def sizes(platform_name: str, quick: bool) -> dict:
                 base_keepout_b=4, base_speed_b=64, fleet_robots=8, fleet_steps=5, repeats=5)
   if platform_name == "cpu":
     return dict(keepout_b=256, hw=200, mask=2000, filter_b=4096, infl_b=64, pipe_b=64, copy_mb=256,
-                base_keepout_b=16, base_speed_b=512, fleet_robots=64, fleet_steps=50, repeats=5)
+                base_keepout_b=16, base_speed_b=512, fleet_robots=1024, fleet_steps=100, repeats=5)
   return dict(keepout_b=16384, hw=200, mask=2000, filter_b=65536, infl_b=16384, pipe_b=4096,
-              copy_mb=2048, base_keepout_b=16, base_speed_b=512, fleet_robots=4096, fleet_steps=100,
+              copy_mb=2048, base_keepout_b=16, base_speed_b=512, fleet_robots=65536, fleet_steps=100,
               repeats=7)
 
 
