@@ -3,12 +3,10 @@
 import os
 from pathlib import Path
 
-# Before JAX starts: XLA:CPU's new fusion emitter recomputes the exact cell-index
-# arithmetic inside every fused output cell (keepout 8.5 ms vs 0.17 ms on [8, 60, 60])
-# and compiles ~25 % slower; sims/cli.py and benchmarks/run.py set the same flag.
-_flag = "--xla_cpu_use_fusion_emitters=false"
-if _flag not in os.environ.get("XLA_FLAGS", ""):
-  os.environ["XLA_FLAGS"] = (os.environ.get("XLA_FLAGS", "") + " " + _flag).strip()
+from sims import xla_flags
+
+# Before JAX starts (see sims/xla_flags.py); the CLI and the benchmarks do the same.
+xla_flags.use_fast_cpu_compile()
 
 import jax  # noqa: E402
 import pytest
