@@ -12,7 +12,6 @@ goes to stderr either way.
 from __future__ import annotations
 
 import argparse
-import dataclasses
 import inspect
 import json
 import math

@@ -18,7 +18,7 @@ import jax.numpy as jnp
 from jaxfilters import constants
 from jaxfilters import geometry
 from jaxfilters.speed import _exact_sign_affine, _mask_leaves, _transform_point
-from jaxfilters.types import FilterMask, _dataclass, check_poses, resolve_mask_index
+from jaxfilters.types import FilterMask, _dataclass, robot_inputs
 
 _F32 = jnp.float32
 
@@ -66,6 +66,13 @@ def binary_filter_one(state, data, mask_origin, mask_res, info, pose, default_st
   return BinaryState(new), BinaryResult(new, active & published, active & known)
 
 
+def _per_robot(name, value, dtype, b):
+  v = jnp.asarray(value, dtype)
+  if v.shape not in ((), (b,)):
+    raise ValueError(f"{name} must be a scalar or [B] = ({b},); got shape {tuple(v.shape)}")
+  return jnp.broadcast_to(v, (b,))
+
+
 def binary_filter(mask: FilterMask, poses, state: BinaryState, *, default_state=False,
                   flip_threshold=50.0, mask_index=None, enabled=None,
                   transform=None) -> tuple[BinaryState, BinaryResult]:
@@ -85,14 +92,9 @@ def binary_filter(mask: FilterMask, poses, state: BinaryState, *, default_state=
   """
   with jax.named_scope("binary_filter"):
     b = state.binary_state.shape[0]
-    idx = resolve_mask_index(mask, mask_index, b)
-    poses = check_poses(poses, b)
-    bc = lambda x, dt: jnp.broadcast_to(jnp.asarray(x, dt), (b,))
-    enabled = bc(True if enabled is None else enabled, bool)
-    default_state = bc(default_state, bool)
-    flip_threshold = bc(flip_threshold, _F32)
-    if transform is not None:
-      transform = jnp.broadcast_to(jnp.asarray(transform, _F32), (b, 3))
+    idx, poses, enabled, transform = robot_inputs(mask, poses, b, mask_index, enabled, transform)
+    default_state = _per_robot("default_state", default_state, bool, b)
+    flip_threshold = _per_robot("flip_threshold", flip_threshold, _F32, b)
 
     def one(st, i, pose, ds, thr, en, tf):
       return binary_filter_one(st, *_mask_leaves(mask, i), pose, ds, thr, en, tf)

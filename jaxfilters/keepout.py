@@ -25,7 +25,6 @@ within ~1e-6 m of a mask cell boundary may pick the neighbouring mask cell.
 from __future__ import annotations
 
 import dataclasses
-from functools import partial
 
 import jax
 import jax.numpy as jnp
@@ -33,7 +32,7 @@ import numpy as np
 
 from jaxfilters import constants
 from jaxfilters import geometry
-from jaxfilters.types import Costmap, FilterMask, _dataclass, check_poses, resolve_mask_index
+from jaxfilters.types import Costmap, FilterMask, _dataclass, robot_inputs
 
 _F32 = jnp.float32
 _EMPTY_BOX = (np.inf, np.inf, -np.inf, -np.inf)
@@ -431,9 +430,7 @@ def _aligned_batch(costmap, mask, idx, state, window, enabled, *, config: Keepou
 def _batched_inputs(costmap, mask, poses, mask_index, enabled, window, transform):
   b = costmap.num_robots
   h, w = costmap.cost.shape[1:]
-  idx = resolve_mask_index(mask, mask_index, b)
-  poses = check_poses(poses, b)
-  enabled = jnp.broadcast_to(jnp.asarray(True if enabled is None else enabled, bool), (b,))
+  idx, poses, enabled, transform = robot_inputs(mask, poses, b, mask_index, enabled, transform)
   if window is None:
     window = jnp.tile(jnp.asarray([0, 0, w, h], jnp.int32), (b, 1))
   else:
@@ -445,12 +442,6 @@ def _batched_inputs(costmap, mask, poses, mask_index, enabled, window, transform
     window = jnp.broadcast_to(window.astype(jnp.int32), (b, 4))
     window = jnp.stack([jnp.maximum(window[:, 0], 0), jnp.maximum(window[:, 1], 0),
                         jnp.minimum(window[:, 2], w), jnp.minimum(window[:, 3], h)], axis=1)
-  if transform is not None:
-    transform = jnp.asarray(transform, _F32)
-    if transform.shape not in ((3,), (b, 3)):
-      raise ValueError(f"transform must be T_mask_from_global (x, y, yaw) of shape (3,) or ({b}, 3); "
-                       f"got {tuple(transform.shape)}")
-    transform = jnp.broadcast_to(transform, (b, 3))
   return idx, poses, enabled, window, transform
 
 

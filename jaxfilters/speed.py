@@ -23,7 +23,7 @@ import numpy as np
 
 from jaxfilters import constants
 from jaxfilters import geometry
-from jaxfilters.types import FilterInfo, FilterMask, _dataclass, check_poses, resolve_mask_index
+from jaxfilters.types import FilterInfo, FilterMask, _dataclass, robot_inputs
 
 _F32 = jnp.float32
 
@@ -219,15 +219,7 @@ def speed_lookahead_one(state, data, mask_origin, mask_res, info, pose, path, pa
 
 def _common(mask, poses, state, mask_index, enabled, transform):
   b = state.speed_limit_prev.shape[0]
-  idx = resolve_mask_index(mask, mask_index, b)
-  poses = check_poses(poses, b)
-  enabled = jnp.broadcast_to(jnp.asarray(True if enabled is None else enabled, bool), (b,))
-  if transform is not None:
-    transform = jnp.asarray(transform, _F32)
-    if transform.shape not in ((3,), (b, 3)):
-      raise ValueError(f"transform must be (x, y, yaw) of shape (3,) or ({b}, 3); got {tuple(transform.shape)}")
-    transform = jnp.broadcast_to(transform, (b, 3))
-  return b, idx, poses, enabled, transform
+  return (b, *robot_inputs(mask, poses, b, mask_index, enabled, transform))
 
 
 def _mask_leaves(mask: FilterMask, i):

@@ -248,3 +248,39 @@ def check_poses(poses: Any, num_robots: int) -> jax.Array:
   if not jnp.issubdtype(p.dtype, jnp.floating):
     raise ValueError(f"poses must be floating point; got {p.dtype}")
   return p.astype(jnp.float32)
+
+
+def robot_inputs(mask: FilterMask, poses: Any, num_robots: int, mask_index=None, enabled=None,
+                 transform=None):
+  """Validates and broadcasts the per-robot inputs every filter takes.
+
+  Args:
+    mask: the FilterMask stack.
+    poses: float [B, 3].
+    num_robots: B.
+    mask_index: None (shared mask, M == 1) or int [B].
+    enabled: None (all enabled), a bool scalar, or bool [B].
+    transform: None (mask in the costmap frame), or T_mask_from_global
+      (x, y, yaw) as [3] or [B, 3].
+
+  Returns:
+    (mask index int32 [B], poses float32 [B, 3], enabled bool [B],
+     transform float32 [B, 3] or None).
+
+  Raises:
+    ValueError: any of them with the wrong shape or dtype.
+  """
+  b = num_robots
+  idx = resolve_mask_index(mask, mask_index, b)
+  poses = check_poses(poses, b)
+  en = jnp.asarray(True if enabled is None else enabled)
+  if en.dtype != jnp.bool_ or en.shape not in ((), (b,)):
+    raise ValueError(f"enabled must be a bool scalar or bool [B] = ({b},); got {en.dtype}{tuple(en.shape)}")
+  en = jnp.broadcast_to(en, (b,))
+  if transform is not None:
+    transform = jnp.asarray(transform, jnp.float32)
+    if transform.shape not in ((3,), (b, 3)):
+      raise ValueError(f"transform must be T_mask_from_global (x, y, yaw) of shape (3,) or ({b}, 3); "
+                       f"got {tuple(transform.shape)}")
+    transform = jnp.broadcast_to(transform, (b, 3))
+  return idx, poses, en, transform

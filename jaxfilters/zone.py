@@ -16,19 +16,16 @@ force after Nav2's rules:
 
 from __future__ import annotations
 
-import dataclasses
 from collections.abc import Mapping
 
 import jax
 import jax.numpy as jnp
 import numpy as np
 
-from jaxfilters import constants
 from jaxfilters import geometry
 from jaxfilters.speed import _mask_leaves, _transform_point
-from jaxfilters.types import FilterMask, _dataclass, check_poses, resolve_mask_index
+from jaxfilters.types import FilterMask, _dataclass, robot_inputs
 
-_F32 = jnp.float32
 NUM_ZONES = 128  # int8 mask values 0..127
 
 
@@ -170,14 +167,10 @@ def zone_filter(mask: FilterMask, poses, state: ZoneState, table: ZoneTable, *, 
   """
   with jax.named_scope("zone_filter"):
     b = state.current.shape[0]
-    idx = resolve_mask_index(mask, mask_index, b)
-    poses = check_poses(poses, b)
+    idx, poses, enabled, transform = robot_inputs(mask, poses, b, mask_index, enabled, transform)
     if state.params.shape[1:] != table.nominal.shape:
       raise ValueError(f"ZoneState has {state.params.shape[1:]} parameters but the table has "
                        f"{table.nominal.shape}; build the state with ZoneState.create(table, B)")
-    enabled = jnp.broadcast_to(jnp.asarray(True if enabled is None else enabled, bool), (b,))
-    if transform is not None:
-      transform = jnp.broadcast_to(jnp.asarray(transform, _F32), (b, 3))
 
     def one(st, i, pose, en, tf):
       return zone_filter_one(st, table, *_mask_leaves(mask, i), pose, en, tf)

@@ -196,7 +196,7 @@ class FleetEnv:
     Returns:
       WorldState of one world.
     """
-    cfg, p, k = self.config, self.params, self.num_robots
+    p, k = self.params, self.num_robots
     k_spawn, k_yaw, k_goal, k_state = jax.random.split(key, 4)
     num_spawns = p.spawns.shape[0]
     num_stations = p.nav.stations.shape[0]

@@ -1,7 +1,6 @@
 """The notebooks run top to bottom (they read the real Nav2 maps)."""
 
 import json
-import os
 from pathlib import Path
 
 import pytest

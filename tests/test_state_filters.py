@@ -233,3 +233,18 @@ def test_filter_info_and_mask_validation():
     jf.FilterMask.create([np.zeros((2, 2))], jf.FilterInfo.create(0))
   with pytest.raises(ValueError, match="-1..100"):
     jf.OccupancyGrid.create(np.full((2, 2), 101), 1.0)
+
+
+@pytest.mark.parametrize("call", ["speed", "binary", "zone"])
+def test_bad_per_robot_inputs_raise_clear_errors(call):
+  mask = _mask([[0, 40]], 1.0, (0, 0), 1, 100.0, -1.0)
+  table = jf.ZoneTable.create(["a"], {"a": 1.0}, {})
+  run = {"speed": lambda **kw: jf.speed_filter(mask, np.zeros((2, 3)), jf.SpeedState.create(2), **kw),
+         "binary": lambda **kw: jf.binary_filter(mask, np.zeros((2, 3)), jf.BinaryState.create(2), **kw),
+         "zone": lambda **kw: jf.zone_filter(mask, np.zeros((2, 3)), jf.ZoneState.create(table, 2), table, **kw)}[call]
+  with pytest.raises(ValueError, match="enabled must be"):
+    run(enabled=np.ones((3,), bool))
+  with pytest.raises(ValueError, match="transform must be"):
+    run(transform=np.zeros((2, 2)))
+  with pytest.raises(ValueError, match="mask_index"):
+    run(mask_index=np.zeros((5,), np.int32))
