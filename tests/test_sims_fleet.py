@@ -258,10 +258,18 @@ def test_large_batch_does_not_deadlock():
       full = fleet_throughput(1280, 20, filters=True, robots_per_world=4, repeats=1)
       print(json.dumps([bare, full]))
   """)
-  env = dict(os.environ, XLA_FLAGS=(os.environ.get("XLA_FLAGS", "") + " " + cli.FAST_COMPILE_FLAG).strip())
+  env = dict(os.environ)  # conftest already chose the XLA:CPU flags (sims/xla_flags.py)
   proc = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=300,
                         cwd=Path(__file__).resolve().parents[1], env=env)
   assert proc.returncode == 0, proc.stderr[-2000:]
   bare, full = json.loads(proc.stdout.strip().splitlines()[-1])
   assert bare["num_robots"] == full["num_robots"] == 1280
   assert full["num_worlds"] == 320 and bare["robot_steps_per_s"] > full["robot_steps_per_s"] > 0
+
+
+def test_cli_bench_runs_the_harness(capsys, keep_xla_flags):
+  assert cli.main(["bench", "--quick", "--only", "speed,baseline_speed", "--json"]) == 0
+  report = json.loads(capsys.readouterr().out.strip().splitlines()[-1])
+  speed = report["results"]["speed"]
+  assert speed["unit"] == "robots/s" and speed["throughput"] > 0 and speed["steady_s"] > 0
+  assert report["device"]["platform"] == "cpu" and "speedup_vs_numpy" in speed
