@@ -16,6 +16,7 @@ after `block_until_ready`.
 
 from __future__ import annotations
 
+import dataclasses
 import math
 import time
 
@@ -65,7 +66,7 @@ def bare_mjx_rollout(config: FleetConfig, num_robots: int, num_steps: int):
 
 def fleet_throughput(num_robots: int, num_steps: int, filters: bool = True, impl: str = "jax", *,
                      robots_per_world: int = 8, scenario: Scenario | None = None,
-                     repeats: int = 3, seed: int = 0) -> dict:
+                     repeats: int = 3, seed: int = 0, config: FleetConfig | None = None) -> dict:
   """Measures fleet throughput in robot-steps/s.
 
   Args:
@@ -80,6 +81,8 @@ def fleet_throughput(num_robots: int, num_steps: int, filters: bool = True, impl
     scenario: maps (default: the built-in warehouse).
     repeats: timed runs after compiling; the best is reported.
     seed: PRNG seed.
+    config: a FleetConfig to measure instead of the defaults (its
+      robots_per_world and impl are replaced by the arguments above).
 
   Returns:
     dict with robot_steps_per_s, compile_s, run_s, num_robots, num_worlds,
@@ -91,7 +94,8 @@ def fleet_throughput(num_robots: int, num_steps: int, filters: bool = True, impl
   if num_robots < 1 or num_steps < 1:
     raise ValueError(f"num_robots and num_steps must be >= 1; got {num_robots}, {num_steps}")
   robots_per_world = max(d for d in range(1, min(robots_per_world, num_robots) + 1) if num_robots % d == 0)
-  config = FleetConfig(robots_per_world=robots_per_world if filters else 1, impl=impl)
+  config = dataclasses.replace(config or FleetConfig(), robots_per_world=robots_per_world if filters else 1,
+                               impl=impl)
   if filters:
     env = FleetEnv.create(scenario, config, seed=seed)
     num_worlds = num_robots // robots_per_world
