@@ -118,6 +118,12 @@ def trunc_div_exact(num_terms: Sequence[jax.Array], res: jax.Array) -> jax.Array
   return jnp.where(negative, -q, q)
 
 
+def transform_points(transform: jax.Array, x: jax.Array, y: jax.Array) -> tuple[jax.Array, jax.Array]:
+  """Applies an SE2 transform (tx, ty, yaw) to points (float32): R(yaw) p + t."""
+  c, s = jnp.cos(transform[2]), jnp.sin(transform[2])
+  return c * x - s * y + transform[0], s * x + c * y + transform[1]
+
+
 def world_to_cell(wx: jax.Array, wy: jax.Array, origin: jax.Array, resolution: jax.Array,
                   width: int, height: int) -> tuple[jax.Array, jax.Array, jax.Array]:
   """Nav2 `worldToMap` (spec §2.2): bounded, half-open [o, o + size*res).
@@ -149,28 +155,14 @@ def cell_centre_terms(index: jax.Array, origin: jax.Array, resolution: jax.Array
   return [jnp.asarray(origin, _F32), *exact_product(half_steps, 0.5 * jnp.asarray(resolution, _F32))]
 
 
-def centres_to_cells(num_cells: int, origin: jax.Array, resolution: jax.Array,
-                     target_origin: jax.Array, target_resolution: jax.Array,
-                     target_size: int) -> tuple[jax.Array, jax.Array]:
-  """Maps the centres of `num_cells` cells of one axis onto another grid's axis.
-
-  For same-frame grids the x and y mappings are separable, so the 2-D lookup is
-  a gather with two 1-D index vectors computed exactly once per robot.
-
-  Returns:
-    (index int32 [num_cells] clipped into [0, target_size), valid bool [num_cells]).
-  """
-  i = jnp.arange(num_cells, dtype=jnp.int32)
-  terms = cell_centre_terms(i, origin, resolution) + [-jnp.asarray(target_origin, _F32)]
-  idx = floor_div_exact(terms, target_resolution)
-  valid = (expansion_sign(terms) >= 0) & (idx < target_size)
-  return jnp.clip(idx, 0, target_size - 1), valid
-
-
 def centres_to_cells_2d(shape: tuple[int, int], origin: jax.Array, resolution: jax.Array,
                         target_origin: jax.Array, target_resolution: jax.Array,
                         target_shape: tuple[int, int]):
-  """`centres_to_cells` for the columns and rows of a grid in one stacked division.
+  """Maps the cell centres of a grid's columns and rows onto another grid's cells.
+
+  For same-frame grids the x and y mappings are separable, so the 2-D lookup is
+  a gather with two 1-D index vectors computed exactly once per robot; both
+  axes run as one stacked exact division.
 
   Args:
     shape: (H, W) of the source grid; origin [2], resolution [] its geometry.
@@ -186,7 +178,8 @@ def centres_to_cells_2d(shape: tuple[int, int], origin: jax.Array, resolution: j
   idx = jnp.stack([i, i])
   o = jnp.stack([jnp.full((n,), origin[0], _F32), jnp.full((n,), origin[1], _F32)])
   to = jnp.stack([jnp.full((n,), target_origin[0], _F32), jnp.full((n,), target_origin[1], _F32)])
-  terms = [o, *exact_product(2.0 * idx + 1.0, jnp.broadcast_to(0.5 * jnp.asarray(resolution, _F32), idx.shape)), -to]
+  res = jnp.broadcast_to(jnp.asarray(resolution, _F32), idx.shape)
+  terms = cell_centre_terms(idx, o, res) + [-to]
   cells = floor_div_exact(terms, target_resolution)
   nonneg = expansion_sign(terms) >= 0
   size = jnp.asarray([[wt], [ht]], jnp.int32)

@@ -113,12 +113,6 @@ def _pose_in_lethal_zone(data, mask_origin, mask_res, info_xy):
   return valid & (occ_to_cost(data[my, mx]) >= constants.INSCRIBED_INFLATED_OBSTACLE)
 
 
-def _to_mask_frame(transform, x, y):
-  """Applies T_mask_from_global = (tx, ty, yaw) to global-frame points (float32)."""
-  c, s = jnp.cos(transform[2]), jnp.sin(transform[2])
-  return c * x - s * y + transform[0], s * x + c * y + transform[1]
-
-
 def keepout_update_bounds_one(state, data, mask_origin, mask_res, pose, bounds,
                               master_origin, master_res, new_mask, enabled, transform,
                               *, override_lethal_cost: bool):
@@ -147,7 +141,7 @@ def keepout_update_bounds_one(state, data, mask_origin, mask_res, pose, bounds,
 
   xy = pose[:2]
   if transform is not None:
-    xy = jnp.stack(_to_mask_frame(transform, xy[0], xy[1]))
+    xy = jnp.stack(geometry.transform_points(transform, xy[0], xy[1]))
   lethal = jnp.asarray(False)
   if override_lethal_cost:
     lethal = _pose_in_lethal_zone(data, mask_origin, mask_res, xy)
@@ -227,7 +221,7 @@ def _keepout_stack_one(cost, origin, res, stack, i, mask_origin, mask_res, state
     overlap = jnp.asarray(True)
     cx = origin[0] + (cols.astype(_F32) + 0.5) * res
     cy = origin[1] + (rows.astype(_F32) + 0.5) * res
-    px, py = _to_mask_frame(transform, cx[None, :], cy[:, None])
+    px, py = geometry.transform_points(transform, cx[None, :], cy[:, None])
     mx, my, inside = geometry.world_to_cell(px, py, mask_origin, mask_res, wm, hm)
     in_window = (((cols >= min_i) & (cols < max_i))[None, :] & ((rows >= min_j) & (rows < max_j))[:, None])
     visit = inside & in_window
@@ -241,9 +235,7 @@ def _keepout_stack_one(cost, origin, res, stack, i, mask_origin, mask_res, state
     value = mask_cost
   run = enabled & overlap
   new_cost = jnp.where(run & write, value, cost)
-  new_state = dataclasses.replace(
-      state, last_pose_lethal=jnp.where(run, state.is_pose_lethal, state.last_pose_lethal))
-  return new_cost, new_state
+  return new_cost, _processed(state, run)
 
 
 keepout_one.__doc__ = _keepout_stack_one.__doc__
@@ -257,6 +249,36 @@ def mask_cost_plus_one_table() -> np.ndarray:
 
 
 _COST1 = mask_cost_plus_one_table()
+
+
+def _processed(state, run):
+  """State after process(): last_pose_lethal follows is_pose_lethal unless it returned early."""
+  return dataclasses.replace(
+      state, last_pose_lethal=jnp.where(run, state.is_pose_lethal, state.last_pose_lethal))
+
+
+def _aligned_slice(shape, padded_shape, origin, res, mask_origin, mask_res, window, enabled):
+  """Where a same-resolution costmap's window starts in the padded mask table, and what it visits.
+
+  Args:
+    shape: (H, W) of the costmap; padded_shape: (Hm + 2H, Wm + 2W) of the table.
+    origin, res, mask_origin, mask_res, window, enabled: as keepout_one.
+
+  Returns:
+    (sx, sy) int32 start of the [H, W] window in the table, col_ok bool [W],
+    row_ok bool [H] (False everywhere when the filter does not run), and run bool [].
+  """
+  h, w = shape
+  hm, wm = padded_shape[0] - 2 * h, padded_shape[1] - 2 * w
+  overlap, (x0, y0, x1, y1) = _same_frame_window((hm, wm), mask_origin, mask_res, origin, res, window)
+  k0 = geometry.floor_div_exact(
+      [origin, *geometry.exact_product(jnp.ones((2,), _F32), 0.5 * res), -mask_origin], res)
+  sx = jnp.clip(k0[0], -w, wm) + w
+  sy = jnp.clip(k0[1], -h, hm) + h
+  run = enabled & overlap
+  cols = jnp.arange(w, dtype=jnp.int32)
+  rows = jnp.arange(h, dtype=jnp.int32)
+  return sx, sy, (cols >= x0) & (cols < x1), (rows >= y0) & (rows < y1) & run, run
 
 
 def _aligned_one(cost, origin, res, table, i, mask_origin, mask_res, state, window, enabled,
@@ -284,27 +306,17 @@ def _aligned_one(cost, origin, res, table, i, mask_origin, mask_res, state, wind
     (new cost uint8 [H, W], new state).
   """
   h, w = cost.shape
-  hm, wm = table.shape[1] - 2 * h, table.shape[2] - 2 * w
-  overlap, (x0, y0, x1, y1) = _same_frame_window((hm, wm), mask_origin, mask_res, origin, res, window)
-  k0 = geometry.floor_div_exact(
-      [origin, *geometry.exact_product(jnp.ones((2,), _F32), 0.5 * res), -mask_origin], res)
-  sx = jnp.clip(k0[0], -w, wm) + w
-  sy = jnp.clip(k0[1], -h, hm) + h
+  sx, sy, col_ok, row_ok, run = _aligned_slice(cost.shape, table.shape[1:], origin, res, mask_origin,
+                                               mask_res, window, enabled)
   m1 = jax.lax.dynamic_slice(table, (i, sy, sx), (1, h, w))[0]
-  run = enabled & overlap
-  cols = jnp.arange(w, dtype=jnp.int32)
-  rows = jnp.arange(h, dtype=jnp.int32)
-  visit = ((cols >= x0) & (cols < x1))[None, :] & ((rows >= y0) & (rows < y1) & run)[:, None]
-  m1 = jnp.where(visit, m1, jnp.uint8(0))
+  m1 = jnp.where(col_ok[None, :] & row_ok[:, None], m1, jnp.uint8(0))
   c1 = cost + jnp.uint8(1)
   if config.override_lethal_cost:
     value = jnp.where(state.is_pose_lethal, jnp.uint8(config.lethal_override_cost), m1 - jnp.uint8(1))
     new_cost = jnp.where(m1 > c1, value, cost)
   else:
     new_cost = jnp.maximum(c1, m1) - jnp.uint8(1)
-  new_state = dataclasses.replace(
-      state, last_pose_lethal=jnp.where(run, state.is_pose_lethal, state.last_pose_lethal))
-  return new_cost, new_state
+  return new_cost, _processed(state, run)
 
 
 # SWAR helpers: four uint8 cells per uint32 word, per-byte arithmetic without carries
@@ -361,18 +373,10 @@ def _aligned_packed_one(cost, origin, res, words, i, mask_origin, mask_res, stat
                         *, config: KeepoutConfig, padded_shape):
   """`_aligned_one` on uint32 words: same slice arithmetic, SWAR write rule (W % 4 == 0)."""
   h, w = cost.shape
-  hm, wm = padded_shape[0] - 2 * h, padded_shape[1] - 2 * w
-  overlap, (x0, y0, x1, y1) = _same_frame_window((hm, wm), mask_origin, mask_res, origin, res, window)
-  k0 = geometry.floor_div_exact(
-      [origin, *geometry.exact_product(jnp.ones((2,), _F32), 0.5 * res), -mask_origin], res)
-  sx = jnp.clip(k0[0], -w, wm) + w
-  sy = jnp.clip(k0[1], -h, hm) + h
+  sx, sy, col_ok, row_ok, run = _aligned_slice(cost.shape, padded_shape, origin, res, mask_origin,
+                                               mask_res, window, enabled)
   m1 = jax.lax.dynamic_slice(words, (sx % 4, i, sy, sx // 4), (1, 1, h, w // 4))[0, 0]
-  run = enabled & overlap
-  cols = jnp.arange(w, dtype=jnp.int32)
-  rows = jnp.arange(h, dtype=jnp.int32)
-  col_bytes = jnp.where((cols >= x0) & (cols < x1), jnp.uint8(0xFF), jnp.uint8(0))
-  row_ok = (rows >= y0) & (rows < y1) & run
+  col_bytes = jnp.where(col_ok, jnp.uint8(0xFF), jnp.uint8(0))
   m1 = jnp.where(row_ok[:, None], m1 & _pack(col_bytes)[None, :], _u32(0))
   c = _pack(cost)
   write = _bytes_less_than(_bytes_plus_one(c), m1)
@@ -382,9 +386,7 @@ def _aligned_packed_one(cost, origin, res, words, i, mask_origin, mask_res, stat
   else:
     value = _bytes_minus_one(m1)
   new_cost = _unpack((c & ~write) | (value & write))
-  new_state = dataclasses.replace(
-      state, last_pose_lethal=jnp.where(run, state.is_pose_lethal, state.last_pose_lethal))
-  return new_cost, new_state
+  return new_cost, _processed(state, run)
 
 
 def _aligned_batch(costmap, mask, idx, state, window, enabled, *, config: KeepoutConfig,

@@ -151,8 +151,8 @@ def speed_filter_one(state, data, mask_origin, mask_res, info, pose, enabled, tr
 
 
 def _transform_point(transform, xy):
-  c, s = jnp.cos(transform[2]), jnp.sin(transform[2])
-  return jnp.stack([c * xy[0] - s * xy[1] + transform[0], s * xy[0] + c * xy[1] + transform[1]])
+  """T_mask_from_global applied to one point [2]."""
+  return jnp.stack(geometry.transform_points(transform, xy[0], xy[1]))
 
 
 def _segment_distance(p, a, b):
