@@ -107,9 +107,18 @@ class KeepoutState:
                jnp.tile(jnp.asarray(_EMPTY_BOX, _F32), (num_robots, 1)))
 
 
-def _pose_in_lethal_zone(data, mask_origin, mask_res, info_xy):
+def pose_in_lethal_zone_one(data, mask_origin, mask_res, xy):
+  """Nav2's robot-in-keepout test (spec §4.2): the point's mask cell costs 253 or 254.
+
+  Args:
+    data: int8 [Hm, Wm]; mask_origin float32 [2]; mask_res float32 [].
+    xy: float32 [2] point in the mask frame.
+
+  Returns:
+    bool []: False off the mask.
+  """
   h, w = data.shape
-  mx, my, valid = geometry.world_to_cell(info_xy[0], info_xy[1], mask_origin, mask_res, w, h)
+  mx, my, valid = geometry.world_to_cell(xy[0], xy[1], mask_origin, mask_res, w, h)
   return valid & (occ_to_cost(data[my, mx]) >= constants.INSCRIBED_INFLATED_OBSTACLE)
 
 
@@ -144,7 +153,7 @@ def keepout_update_bounds_one(state, data, mask_origin, mask_res, pose, bounds,
     xy = jnp.stack(geometry.transform_points(transform, xy[0], xy[1]))
   lethal = jnp.asarray(False)
   if override_lethal_cost:
-    lethal = _pose_in_lethal_zone(data, mask_origin, mask_res, xy)
+    lethal = pose_in_lethal_zone_one(data, mask_origin, mask_res, xy)
   keep_box = override_lethal_cost & (lethal | state.last_pose_lethal)
   union = jnp.concatenate([jnp.minimum(state.acc_box[:2], bounds[:2]),
                            jnp.maximum(state.acc_box[2:], bounds[2:])])

@@ -26,8 +26,8 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from jaxfilters import constants, geometry
-from jaxfilters.keepout import occ_to_cost
+from jaxfilters import geometry
+from jaxfilters.keepout import pose_in_lethal_zone_one
 from jaxfilters.types import FilterMask, _dataclass
 
 _F32 = jnp.float32
@@ -82,10 +82,7 @@ def zone_at(speed_mask: FilterMask, zone_table: jax.Array, xy: jax.Array) -> jax
 
 def in_keepout(keepout_mask: FilterMask, xy: jax.Array) -> jax.Array:
   """bool: the point's keepout-mask cell is lethal (Nav2's "pose in keepout", spec §4.2)."""
-  _, h, w = keepout_mask.data.shape
-  mx, my, valid = geometry.world_to_cell(xy[0], xy[1], keepout_mask.origin[0],
-                                         keepout_mask.resolution[0], w, h)
-  return valid & (occ_to_cost(keepout_mask.data[0, my, mx]) >= constants.INSCRIBED_INFLATED_OBSTACLE)
+  return pose_in_lethal_zone_one(keepout_mask.data[0], keepout_mask.origin[0], keepout_mask.resolution[0], xy)
 
 
 def physics_update(m: Metrics, prev_in_keepout: jax.Array, xy: jax.Array, step_len: jax.Array,
