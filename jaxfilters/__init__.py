@@ -6,6 +6,7 @@ public functions take an explicit leading robot axis B.
 """
 
 from jaxfilters import constants
+from jaxfilters._version import __version__
 from jaxfilters.binary import BinaryResult, BinaryState, binary_filter
 from jaxfilters.geometry import world_to_cell
 from jaxfilters.grid import OccupancyGrid
@@ -21,7 +22,7 @@ from jaxfilters.types import Costmap, FilterInfo, FilterMask
 from jaxfilters.zone import ZoneResult, ZoneState, ZoneTable, zone_filter
 
 __all__ = [
-    "BinaryResult", "BinaryState", "Costmap", "FilterInfo", "FilterMask", "InflationConfig",
+    "__version__", "BinaryResult", "BinaryState", "Costmap", "FilterInfo", "FilterMask", "InflationConfig",
     "KeepoutConfig", "KeepoutState", "LayersConfig", "LookaheadConfig", "OccupancyGrid",
     "SpeedResult", "SpeedState", "StaticLayerConfig", "ZoneResult", "ZoneState", "ZoneTable",
     "binary_filter", "constants", "costmap_pipeline", "footprint_radii", "inflate",

@@ -8,9 +8,12 @@
 
 `fleet` writes OUT/summary.json, OUT/trajectories.png (map, zones, paths
 coloured by speed) and with --animate OUT/fleet.gif, and prints a summary
-table. It exits with status 2 if any robot entered a keepout cell or exceeded
+table. It exits with status 3 if any robot entered a keepout cell or exceeded
 a speed zone's limit by more than the stated tolerance (disable with
---no-check).
+--no-check); 2 is a usage error (see jaxfilters/cli.py for every code).
+
+These commands are registered into the library's CLI (`jaxfilters.cli`)
+through the `jaxfilters.commands` entry-point group (pyproject.toml).
 """
 
 from __future__ import annotations
@@ -22,7 +25,7 @@ import sys
 import time
 from pathlib import Path
 
-from sims import xla_flags
+from jaxfilters.cli import EXIT_INTERNAL, EXIT_OK, EXIT_VIOLATION, CliError
 
 
 class _Progress:
@@ -46,7 +49,8 @@ class _Progress:
     sys.stderr.flush()
 
 
-def _fleet_parser(sub) -> argparse.ArgumentParser:
+def register_fleet(sub) -> argparse.ArgumentParser:
+  """Adds `jaxfilters fleet` to the library CLI's subparsers."""
   p = sub.add_parser("fleet", help="simulate a robot fleet in MJX with speed and keepout filters",
                      description="Simulate a fleet of differential-drive robots in MJX. Every velocity "
                      "command is clipped by the Nav2 speed filter and keepout zones are never entered.")
@@ -75,6 +79,7 @@ def _fleet_parser(sub) -> argparse.ArgumentParser:
                  help="exit 0 even with keepout entries or speed violations")
   p.add_argument("--no-cache", action="store_true",
                  help="do not use the persistent XLA compilation cache (~/.cache/jaxfilters/xla)")
+  p.set_defaults(func=run_fleet)
   return p
 
 
@@ -121,14 +126,14 @@ def run_fleet(args) -> int:
   from sims.scenario import Scenario
 
   if args.robots < 1:
-    raise SystemExit("--robots must be >= 1")
+    raise CliError("--robots must be >= 1")
   k = args.robots_per_world or (args.robots if args.robots <= 64 else
                                 max(d for d in range(1, 17) if args.robots % d == 0))
   if args.robots % k:
-    raise SystemExit(f"--robots ({args.robots}) must be a multiple of --robots-per-world ({k})")
+    raise CliError(f"--robots ({args.robots}) must be a multiple of --robots-per-world ({k})")
   maps = (args.map, args.keepout, args.speed)
   if any(m is not None for m in maps) and not all(m is not None for m in maps):
-    raise SystemExit("give all three of --map, --keepout and --speed (or none for the built-in warehouse)")
+    raise CliError("give all three of --map, --keepout and --speed (or none for the built-in warehouse)")
   if args.map is None:
     scenario = Scenario.default()
   else:
@@ -208,36 +213,35 @@ def run_fleet(args) -> int:
   print("wrote " + ", ".join(str(p) for p in written))
   f = summary["fleet"]
   ok = f["speed_compliant"] and f["keepout_entries"] == 0 and f["keepout_steps"] == 0
-  return 0 if ok or args.no_check else 2
+  return EXIT_OK if ok or args.no_check else EXIT_VIOLATION
 
 
-def run_bench(argv) -> int:
+def run_bench(args) -> int:
+  argv = list(getattr(args, "bench_args", []) or [])
   try:
     from benchmarks import run as bench_run
   except ImportError as e:
     print(f"jaxfilters bench: the benchmark harness benchmarks/run.py could not be imported ({e}); "
           "run from a checkout that has benchmarks/run.py", file=sys.stderr)
-    return 1
+    return EXIT_INTERNAL
   if not hasattr(bench_run, "main"):
     print("jaxfilters bench: benchmarks/run.py has no main(argv)", file=sys.stderr)
-    return 1
+    return EXIT_INTERNAL
   return bench_run.main(argv) or 0
 
 
+def register_bench(sub) -> argparse.ArgumentParser:
+  """Adds `jaxfilters bench` (options pass through to benchmarks/run.py)."""
+  p = sub.add_parser("bench", help="run the benchmark harness (benchmarks/run.py); options pass through",
+                     add_help=False)
+  p.set_defaults(func=run_bench, passthrough="bench_args")
+  return p
+
+
 def main(argv=None) -> int:
-  """Entry point of the `jaxfilters` console script."""
-  argv = list(sys.argv[1:] if argv is None else argv)
-  xla_flags.use_fast_cpu_compile()
-  if argv and argv[0] == "bench":
-    return run_bench(argv[1:])
-  parser = argparse.ArgumentParser(prog="jaxfilters", description=__doc__.splitlines()[0])
-  sub = parser.add_subparsers(dest="command", required=True)
-  _fleet_parser(sub)
-  sub.add_parser("bench", help="run the benchmark harness (benchmarks/run.py); options pass through")
-  args = parser.parse_args(argv)
-  if args.command == "fleet":
-    return run_fleet(args)
-  return run_bench([])
+  """Kept for `python -m sims.cli`: the same as the `jaxfilters` console script."""
+  from jaxfilters.cli import main as cli_main
+  return cli_main(argv)
 
 
 if __name__ == "__main__":
