@@ -17,6 +17,7 @@ import jax.numpy as jnp
 
 from jaxfilters import constants
 from jaxfilters import geometry
+from jaxfilters import validate
 from jaxfilters.speed import _exact_sign_affine, _mask_leaves, _transform_point
 from jaxfilters.types import FilterMask, _dataclass, robot_inputs
 
@@ -41,10 +42,13 @@ class BinaryResult:
     binary_state: bool [B], the state after this cycle.
     published: bool [B], Nav2 would publish std_msgs/Bool(binary_state).
     in_mask: bool [B], the robot was on a known mask cell.
+    error: bool [B], the robot's traced mask_index was outside [0, M): its
+      state was kept and nothing published.
   """
   binary_state: jax.Array
   published: jax.Array
   in_mask: jax.Array
+  error: jax.Array | None = None
 
 
 def binary_filter_one(state, data, mask_origin, mask_res, info, pose, default_state,
@@ -63,7 +67,7 @@ def binary_filter_one(state, data, mask_origin, mask_res, info, pose, default_st
   new = jnp.where(inside, jnp.where(known, target, s), default_state)
   published = jnp.where(inside, known & (new != s), True)
   new = jnp.where(active, new, s)
-  return BinaryState(new), BinaryResult(new, active & published, active & known)
+  return BinaryState(new), BinaryResult(new, active & published, active & known, jnp.asarray(False))
 
 
 def _per_robot(name, value, dtype, b):
@@ -76,7 +80,7 @@ def _per_robot(name, value, dtype, b):
 def binary_filter(mask: FilterMask, poses, state: BinaryState, *, default_state=False,
                   flip_threshold=50.0, mask_index=None, enabled=None,
                   transform=None) -> tuple[BinaryState, BinaryResult]:
-  """Nav2 BinaryFilter over a fleet.
+  """Nav2 BinaryFilter over a fleet. Jitted at the edge (inlines inside `jit`).
 
   Args:
     mask: FilterMask of type 3 (other types make the filter inert, as in Nav2).
@@ -84,20 +88,35 @@ def binary_filter(mask: FilterMask, poses, state: BinaryState, *, default_state=
     state: BinaryState [B].
     default_state: bool [B] or scalar (Nav2 `default_state`).
     flip_threshold: float [B] or scalar (Nav2 `flip_threshold`, default 50.0),
-      compared as float32.
-    mask_index, enabled, transform: as jaxfilters.speed.speed_filter.
+      compared as float32 (must be finite in float32).
+    mask_index, enabled, transform: as jaxfilters.speed.speed_filter (a traced
+      out-of-range mask_index keeps the state, publishes nothing, sets `error`).
 
   Returns:
     (new BinaryState, BinaryResult [B]).
   """
+  if not isinstance(state, BinaryState):
+    raise TypeError(f"state must be a BinaryState (BinaryState.create); got {type(state).__name__}")
+  b = state.binary_state.shape[0]
+  idx, idx_ok, poses, enabled, transform = robot_inputs(mask, poses, b, mask_index, enabled, transform)
+  if not isinstance(flip_threshold, jax.core.Tracer):
+    validate.float32_values(flip_threshold, "flip_threshold", owner="binary_filter")
+  ds = jnp.asarray(default_state)
+  if ds.dtype != jnp.bool_:
+    raise ValueError(f"default_state must be bool (scalar or [B]); got {ds.dtype}")
+  default_state = _per_robot("default_state", ds, bool, b)
+  flip_threshold = _per_robot("flip_threshold", flip_threshold, _F32, b)
+  return _binary_jit(mask, poses, state, default_state, flip_threshold, idx, idx_ok, enabled, transform)
+
+
+@jax.jit
+def _binary_jit(mask, poses, state, default_state, flip_threshold, idx, idx_ok, enabled, transform):
   with jax.named_scope("binary_filter"):
-    b = state.binary_state.shape[0]
-    idx, poses, enabled, transform = robot_inputs(mask, poses, b, mask_index, enabled, transform)
-    default_state = _per_robot("default_state", default_state, bool, b)
-    flip_threshold = _per_robot("flip_threshold", flip_threshold, _F32, b)
+    def one(st, i, ok, pose, ds, thr, en, tf):
+      new, out = binary_filter_one(st, *_mask_leaves(mask, i), pose, ds, thr, en, tf)
+      kept = jax.tree.map(lambda a, b: jnp.where(ok, a, b), new, st)
+      out = BinaryResult(kept.binary_state, out.published & ok, out.in_mask & ok, ~ok)
+      return kept, out
 
-    def one(st, i, pose, ds, thr, en, tf):
-      return binary_filter_one(st, *_mask_leaves(mask, i), pose, ds, thr, en, tf)
-
-    return jax.vmap(one, in_axes=(0, 0, 0, 0, 0, 0, None if transform is None else 0))(
-        state, idx, poses, default_state, flip_threshold, enabled, transform)
+    return jax.vmap(one, in_axes=(0, 0, 0, 0, 0, 0, 0, None if transform is None else 0))(
+        state, idx, idx_ok, poses, default_state, flip_threshold, enabled, transform)

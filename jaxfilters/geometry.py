@@ -21,8 +21,13 @@ given those values (tests/test_geometry.py proves it with hypothesis up to
 10 km, including points placed exactly on cell boundaries). XLA flushes
 subnormal float32 values to zero, so the guarantee holds for inputs that are 0
 or at least 1e-30 in magnitude (no error term of the arithmetic is subnormal). Host-side float64
-values (YAML origins such as -15.1) are rounded to float32 once when a mask or
-costmap is built; the reference tests use those rounded values.
+values (YAML origins such as -15.1, a costmap resolution of 0.05) are *not*
+rounded: `validate.split_float64` splits each into three float32 parts whose exact sum
+is the double (24 + 24 + 5 bits cover its 53), and the exact arithmetic takes
+the parts as extra terms. So a floor decided from Nav2's doubles (the costmap
+origin and resolution, the mask origin; the mask resolution is float32 in
+nav_msgs) is the floor Nav2 computes (spec §4.3's coarse-mask example: 21 with
+the decimal 0.05). Poses stay float32 inputs.
 
 The keepout filter's different-frame path rotates cell centres in float32
 before this exact floor (Nav2 rotates in float64), so a cell whose centre maps
@@ -86,31 +91,41 @@ def expansion_sign(terms: Sequence[jax.Array]) -> jax.Array:
   return sign
 
 
-def floor_div_exact(num_terms: Sequence[jax.Array], res: jax.Array) -> jax.Array:
+def _as_terms(res) -> list[jax.Array]:
+  if isinstance(res, (list, tuple)):
+    return [jnp.asarray(r, _F32) for r in res]
+  return [jnp.asarray(res, _F32)]
+
+
+def floor_div_exact(num_terms: Sequence[jax.Array], res) -> jax.Array:
   """Exact floor(sum(num_terms) / res) as int32, for res > 0 and |quotient| < 2**22.
 
-  Both candidate checks (q0 and q0 + 1) run as one stacked expansion, which
-  halves the traced program (compile time matters: this sits in every filter).
+  `res` is one float32 array or a list of float32 parts whose exact sum is the
+  divisor (a host double carried as `split_float64` parts). Both candidate
+  checks (q0 and q0 + 1) run as one stacked expansion, which halves the traced
+  program (compile time matters: this sits in every filter).
   """
   num_terms = [jnp.asarray(t, _F32) for t in num_terms]
-  res = jnp.asarray(res, _F32)
-  shape = jnp.broadcast_shapes(res.shape, *[t.shape for t in num_terms])
+  res_terms = _as_terms(res)
+  shape = jnp.broadcast_shapes(*[r.shape for r in res_terms], *[t.shape for t in num_terms])
   num_terms = [jnp.broadcast_to(t, shape) for t in num_terms]
-  res = jnp.broadcast_to(res, shape)
+  res_terms = [jnp.broadcast_to(r, shape) for r in res_terms]
   approx = num_terms[0]
   for t in num_terms[1:]:
     approx = approx + t
-  q0 = jnp.floor(approx / res)
+  q0 = jnp.floor(approx / res_terms[0])
   q0 = jnp.where(jnp.isfinite(q0), q0, 0.0)
   cands = jnp.stack([q0, q0 + 1.0])
-  terms = [jnp.stack([t, t]) for t in num_terms] + [-p for p in exact_product(cands, jnp.stack([res, res]))]
+  terms = [jnp.stack([t, t]) for t in num_terms]
+  for r in res_terms:
+    terms += [-p for p in exact_product(cands, jnp.stack([r, r]))]
   signs = expansion_sign(terms)
   below, above = signs[0] < 0, signs[1] >= 0
   q = jnp.where(below, q0 - 1.0, jnp.where(above, q0 + 1.0, q0))
   return q.astype(jnp.int32)
 
 
-def trunc_div_exact(num_terms: Sequence[jax.Array], res: jax.Array) -> jax.Array:
+def trunc_div_exact(num_terms: Sequence[jax.Array], res) -> jax.Array:
   """Exact trunc(sum / res) toward zero as int32 (C++ `static_cast<int>`)."""
   num_terms = [jnp.asarray(t, _F32) for t in num_terms]
   negative = expansion_sign(num_terms) < 0
@@ -124,15 +139,42 @@ def transform_points(transform: jax.Array, x: jax.Array, y: jax.Array) -> tuple[
   return c * x - s * y + transform[0], s * x + c * y + transform[1]
 
 
-def world_to_cell(wx: jax.Array, wy: jax.Array, origin: jax.Array, resolution: jax.Array,
-                  width: int, height: int) -> tuple[jax.Array, jax.Array, jax.Array]:
+def origin_terms(origin: jax.Array, origin_lo: jax.Array | None) -> list[jax.Array]:
+  """Float32 terms [2]-shaped whose exact sum is the host origin (x, y).
+
+  Args:
+    origin: float32 [2], the float32 rounding of the origin (the `hi` part).
+    origin_lo: None (the origin is exactly float32) or float32 [2, 2], the
+      (mid, lo) parts from `validate.split_float64`.
+  """
+  terms = [jnp.asarray(origin, _F32)]
+  if origin_lo is not None:
+    terms += [jnp.asarray(origin_lo, _F32)[:, 0], jnp.asarray(origin_lo, _F32)[:, 1]]
+  return terms
+
+
+def resolution_terms(resolution: jax.Array, resolution_lo: jax.Array | None) -> list[jax.Array]:
+  """Float32 parts whose exact sum is the host resolution (see `origin_terms`)."""
+  terms = [jnp.asarray(resolution, _F32)]
+  if resolution_lo is not None:
+    lo = jnp.asarray(resolution_lo, _F32)
+    terms += [lo[..., 0], lo[..., 1]]
+  return terms
+
+
+def world_to_cell(wx: jax.Array, wy: jax.Array, origin, resolution: jax.Array,
+                  width: int, height: int, origin_lo: jax.Array | None = None
+                  ) -> tuple[jax.Array, jax.Array, jax.Array]:
   """Nav2 `worldToMap` (spec §2.2): bounded, half-open [o, o + size*res).
 
   Args:
     wx, wy: float32 world coordinates (any matching shape).
-    origin: float32 [2], lower-left corner of cell (0, 0).
+    origin: float32 [2], lower-left corner of cell (0, 0), or a list of [2]
+      float32 parts whose exact sum is the origin.
     resolution: float32 scalar, metres per cell.
     width, height: grid size in cells (static).
+    origin_lo: optional float32 [2, 2] extra parts of a float64 origin
+      (`validate.split_float64`); the comparison and the floor then use the double.
 
   Returns:
     (mx, my, valid): int32 cells (clipped into the grid so they can index it)
@@ -141,22 +183,36 @@ def world_to_cell(wx: jax.Array, wy: jax.Array, origin: jax.Array, resolution: j
   wx = jnp.asarray(wx, _F32)
   wy = jnp.asarray(wy, _F32)
   wx, wy = jnp.broadcast_arrays(wx, wy)
-  ox, oy = origin[0].astype(_F32), origin[1].astype(_F32)
-  o = jnp.stack([jnp.broadcast_to(ox, wx.shape), jnp.broadcast_to(oy, wx.shape)])
-  mx, my = floor_div_exact([jnp.stack([wx, wy]), -o], resolution)
-  valid = ((wx >= ox) & (wy >= oy) & (mx < width) & (my < height)
-           & jnp.isfinite(wx) & jnp.isfinite(wy))
+  parts = _as_terms(origin)
+  if origin_lo is not None:
+    parts += origin_terms(parts[0], origin_lo)[1:]
+  o_terms = [-jnp.stack([jnp.broadcast_to(t[0], wx.shape), jnp.broadcast_to(t[1], wx.shape)])
+             for t in parts]
+  terms = [jnp.stack([wx, wy]), *o_terms]
+  mx, my = floor_div_exact(terms, resolution)
+  if len(parts) == 1:
+    inside_lo = (wx >= parts[0][0]) & (wy >= parts[0][1])
+  else:
+    nonneg = expansion_sign(terms) >= 0
+    inside_lo = nonneg[0] & nonneg[1]
+  valid = inside_lo & (mx < width) & (my < height) & jnp.isfinite(wx) & jnp.isfinite(wy)
   return (jnp.clip(mx, 0, width - 1), jnp.clip(my, 0, height - 1), valid)
 
 
-def cell_centre_terms(index: jax.Array, origin: jax.Array, resolution: jax.Array) -> list[jax.Array]:
-  """Float32 terms summing exactly to the world centre origin + (index + 0.5) * res."""
+def cell_centre_terms(index: jax.Array, origin, resolution) -> list[jax.Array]:
+  """Float32 terms summing exactly to the world centre origin + (index + 0.5) * res.
+
+  `origin` and `resolution` are float32 arrays or lists of parts (host doubles).
+  """
   half_steps = 2.0 * jnp.asarray(index, _F32) + 1.0      # exact for index < 2**23
-  return [jnp.asarray(origin, _F32), *exact_product(half_steps, 0.5 * jnp.asarray(resolution, _F32))]
+  terms = list(_as_terms(origin))
+  for r in _as_terms(resolution):
+    terms += exact_product(half_steps, 0.5 * r)
+  return terms
 
 
-def centres_to_cells_2d(shape: tuple[int, int], origin: jax.Array, resolution: jax.Array,
-                        target_origin: jax.Array, target_resolution: jax.Array,
+def centres_to_cells_2d(shape: tuple[int, int], origin, resolution,
+                        target_origin, target_resolution: jax.Array,
                         target_shape: tuple[int, int]):
   """Maps the cell centres of a grid's columns and rows onto another grid's cells.
 
@@ -165,8 +221,10 @@ def centres_to_cells_2d(shape: tuple[int, int], origin: jax.Array, resolution: j
   axes run as one stacked exact division.
 
   Args:
-    shape: (H, W) of the source grid; origin [2], resolution [] its geometry.
-    target_origin [2], target_resolution [], target_shape (Ht, Wt): the target grid.
+    shape: (H, W) of the source grid; origin [2] (or a list of [2] parts),
+      resolution [] (or a list of [] parts) its geometry.
+    target_origin [2] (or parts), target_resolution [], target_shape (Ht, Wt):
+      the target grid.
 
   Returns:
     ((mx int32 [W], vx bool [W]), (my int32 [H], vy bool [H])).
@@ -176,10 +234,10 @@ def centres_to_cells_2d(shape: tuple[int, int], origin: jax.Array, resolution: j
   n = max(h, w)
   i = jnp.arange(n, dtype=_F32)
   idx = jnp.stack([i, i])
-  o = jnp.stack([jnp.full((n,), origin[0], _F32), jnp.full((n,), origin[1], _F32)])
-  to = jnp.stack([jnp.full((n,), target_origin[0], _F32), jnp.full((n,), target_origin[1], _F32)])
-  res = jnp.broadcast_to(jnp.asarray(resolution, _F32), idx.shape)
-  terms = cell_centre_terms(idx, o, res) + [-to]
+  per_axis = lambda o: jnp.stack([jnp.full((n,), o[0], _F32), jnp.full((n,), o[1], _F32)])
+  o = [per_axis(t) for t in _as_terms(origin)]
+  res = [jnp.broadcast_to(r, idx.shape) for r in _as_terms(resolution)]
+  terms = cell_centre_terms(idx, o, res) + [-per_axis(t) for t in _as_terms(target_origin)]
   cells = floor_div_exact(terms, target_resolution)
   nonneg = expansion_sign(terms) >= 0
   size = jnp.asarray([[wt], [ht]], jnp.int32)

@@ -16,15 +16,23 @@ Both are written for one robot (`*_one`) and vmapped once at the public edge.
 Lanes (seed design: "covered by KeepoutFilter") are keepout masks with graded
 values 1..99, which give intermediate costs round(2.54 * d).
 
-Float policy: same-frame cell mapping is exact (jaxfilters.geometry). With a
-frame transform (`transform` given) each master cell centre is rotated in
-float32, then mapped exactly; Nav2 rotates in float64, so a centre that lands
-within ~1e-6 m of a mask cell boundary may pick the neighbouring mask cell.
+Float policy: same-frame cell mapping is exact (jaxfilters.geometry), on the
+host doubles of the costmap's origin and resolution and the mask's origin
+(carried as float32 parts). With a frame transform (`transform` given) each
+master cell centre is rotated in float32, then mapped exactly; Nav2 rotates in
+float64, so a centre that lands within ~1e-6 m of a mask cell boundary may
+pick the neighbouring mask cell.
+
+Both public functions are jitted at the edge (STYLE.md habit 14): an eager
+call compiles once per shape and config, and inside a caller's `jit` they
+inline. A robot whose traced `mask_index` is outside [0, M) is left untouched
+and gets `KeepoutState.error` True (an eager call raises instead).
 """
 
 from __future__ import annotations
 
 import dataclasses
+import functools
 
 import jax
 import jax.numpy as jnp
@@ -32,7 +40,7 @@ import numpy as np
 
 from jaxfilters import constants
 from jaxfilters import geometry
-from jaxfilters.types import Costmap, FilterMask, _dataclass, robot_inputs
+from jaxfilters.types import Costmap, FilterMask, _dataclass, check_costmap, robot_inputs
 
 _F32 = jnp.float32
 _EMPTY_BOX = (np.inf, np.inf, -np.inf, -np.inf)
@@ -96,35 +104,46 @@ class KeepoutState:
     last_pose_lethal: bool [B], the value at the end of the last process().
     acc_box: float32 [B, 4] world (min_x, min_y, max_x, max_y) accumulated while
       the robot is in a zone; (+inf, +inf, -inf, -inf) when empty.
+    error: bool [B], the last call could not run for this robot because its
+      traced `mask_index` was outside [0, M): nothing was written and the
+      rest of its state was kept. None in a hand-built state.
   """
   is_pose_lethal: jax.Array
   last_pose_lethal: jax.Array
   acc_box: jax.Array
+  error: jax.Array | None = None
 
   @classmethod
   def create(cls, num_robots: int) -> "KeepoutState":
+    """The state before the first cycle: not in a zone, empty box, no error."""
     return cls(jnp.zeros((num_robots,), bool), jnp.zeros((num_robots,), bool),
-               jnp.tile(jnp.asarray(_EMPTY_BOX, _F32), (num_robots, 1)))
+               jnp.tile(jnp.asarray(_EMPTY_BOX, _F32), (num_robots, 1)),
+               jnp.zeros((num_robots,), bool))
 
 
-def pose_in_lethal_zone_one(data, mask_origin, mask_res, xy):
+def pose_in_lethal_zone_one(data, mask_origin, mask_res, xy, mask_origin_lo=None):
   """Nav2's robot-in-keepout test (spec §4.2): the point's mask cell costs 253 or 254.
+
+  Unknown mask cells (cost 255, data -1) are not lethal: a robot standing on
+  one does not switch escape mode on.
 
   Args:
     data: int8 [Hm, Wm]; mask_origin float32 [2]; mask_res float32 [].
     xy: float32 [2] point in the mask frame.
+    mask_origin_lo: optional float32 [2, 2] parts of a float64 mask origin.
 
   Returns:
     bool []: False off the mask.
   """
   h, w = data.shape
-  mx, my, valid = geometry.world_to_cell(xy[0], xy[1], mask_origin, mask_res, w, h)
-  return valid & (occ_to_cost(data[my, mx]) >= constants.INSCRIBED_INFLATED_OBSTACLE)
+  mx, my, valid = geometry.world_to_cell(xy[0], xy[1], mask_origin, mask_res, w, h, mask_origin_lo)
+  cost = occ_to_cost(data[my, mx])
+  return valid & (cost >= constants.INSCRIBED_INFLATED_OBSTACLE) & (cost <= constants.LETHAL_OBSTACLE)
 
 
 def keepout_update_bounds_one(state, data, mask_origin, mask_res, pose, bounds,
                               master_origin, master_res, new_mask, enabled, transform,
-                              *, override_lethal_cost: bool):
+                              *, override_lethal_cost: bool, mask_origin_lo=None, index_ok=True):
   """KeepoutFilter::updateBounds for one robot (spec §4.2).
 
   Args:
@@ -138,6 +157,9 @@ def keepout_update_bounds_one(state, data, mask_origin, mask_res, pose, bounds,
     enabled: bool [].
     transform: float32 [3] T_mask_from_global or None (same frame).
     override_lethal_cost: static, escape mode.
+    mask_origin_lo: optional float32 [2, 2] parts of a float64 mask origin.
+    index_ok: bool [], this robot's mask_index is in range (else nothing runs
+      and `error` is set).
 
   Returns:
     (new state, new bounds).
@@ -153,33 +175,42 @@ def keepout_update_bounds_one(state, data, mask_origin, mask_res, pose, bounds,
     xy = jnp.stack(geometry.transform_points(transform, xy[0], xy[1]))
   lethal = jnp.asarray(False)
   if override_lethal_cost:
-    lethal = pose_in_lethal_zone_one(data, mask_origin, mask_res, xy)
+    lethal = pose_in_lethal_zone_one(data, mask_origin, mask_res, xy, mask_origin_lo)
   keep_box = override_lethal_cost & (lethal | state.last_pose_lethal)
   union = jnp.concatenate([jnp.minimum(state.acc_box[:2], bounds[:2]),
                            jnp.maximum(state.acc_box[2:], bounds[2:])])
   acc = jnp.where(keep_box, union, jnp.asarray(_EMPTY_BOX, _F32))
-  normal_state = KeepoutState(lethal, state.last_pose_lethal, acc)
+  normal_state = dataclasses.replace(state, is_pose_lethal=lethal, acc_box=acc)
   normal_bounds = jnp.where(keep_box, union, bounds)
 
   pick = lambda a, b: jax.tree.map(lambda x, y: jnp.where(new_mask, x, y), a, b)
   out_state = pick(state, normal_state)
   out_bounds = jnp.where(new_mask, grown, normal_bounds)
-  out_state = jax.tree.map(lambda x, y: jnp.where(enabled, x, y), out_state, state)
-  return out_state, jnp.where(enabled, out_bounds, bounds)
+  run = enabled & index_ok
+  out_state = jax.tree.map(lambda x, y: jnp.where(run, x, y), out_state, state)
+  out_state = _with_error(out_state, ~index_ok)
+  return out_state, jnp.where(run, out_bounds, bounds)
+
+
+def _with_error(state, error):
+  return dataclasses.replace(state, error=jnp.asarray(error, bool))
 
 
 def _same_frame_window(shape_m, mask_origin, mask_res, origin, res, window):
   """Nav2's same-frame overlap clip with the mask's half cell (spec §4.3).
 
   The four worldToMapNoBounds calls run as one stacked exact division.
+  `mask_origin`, `origin` and `res` are float32 arrays or lists of float32
+  parts (host doubles); `mask_res` is float32 (nav_msgs).
   """
   hm, wm = shape_m
   half = 0.5 * mask_res
   min_i, min_j, max_i, max_j = window[0], window[1], window[2], window[3]
-  mo = jnp.stack([mask_origin[0], mask_origin[1], mask_origin[0], mask_origin[1]])
-  o = jnp.stack([origin[0], origin[1], origin[0], origin[1]])
+  four = lambda o: jnp.stack([o[0], o[1], o[0], o[1]])
+  mo = [four(t) for t in geometry._as_terms(mask_origin)]
+  o = [-four(t) for t in geometry._as_terms(origin)]
   extent = jnp.asarray([0.0, 0.0, wm, hm], _F32)       # corners (0, 0) and (Wm, Hm)
-  g = geometry.trunc_div_exact([mo, *geometry.exact_product(extent, mask_res), half, -o], res)
+  g = geometry.trunc_div_exact([*mo, *geometry.exact_product(extent, mask_res), half, *o], res)
   g0, g1 = (g[0], g[1]), (g[2], g[3])
   overlap = ~((g0[0] >= max_i) | (g0[1] >= max_j)) & ~((g1[0] <= min_i) | (g1[1] <= min_j))
   x0, y0 = jnp.maximum(min_i, g0[0]), jnp.maximum(min_j, g0[1])
@@ -194,15 +225,16 @@ def keepout_one(cost, origin, res, data, mask_origin, mask_res, state, window, e
 
 
 def _keepout_stack_one(cost, origin, res, stack, i, mask_origin, mask_res, state, window, enabled,
-                       transform, *, config: KeepoutConfig):
+                       transform, *, config: KeepoutConfig, index_ok=True):
   """KeepoutFilter::process for one robot's costmap (spec §4.3-§4.4).
 
   Args:
     cost: uint8 [H, W] the combined costmap.
-    origin, res: float32 [2], [] its geometry.
+    origin, res: float32 [2], [] its geometry (or lists of float32 parts
+      whose exact sums are the host doubles).
     data: int8 [Hm, Wm] this robot's mask (`keepout_one`); the private
       `_keepout_stack_one` takes the [M, Hm, Wm] stack and the index i instead.
-    mask_origin, mask_res: float32 [2], [].
+    mask_origin, mask_res: float32 [2] (or a list of [2] parts), [].
     state: KeepoutState for this robot (scalar leaves).
     window: int32 [4] (min_i, min_j, max_i, max_j), half-open update window.
     enabled: bool [].
@@ -228,8 +260,10 @@ def _keepout_stack_one(cost, origin, res, stack, i, mask_origin, mask_res, state
     mask_val = flat[base + my[:, None] * wm + mx[None, :]]
   else:
     overlap = jnp.asarray(True)
-    cx = origin[0] + (cols.astype(_F32) + 0.5) * res
-    cy = origin[1] + (rows.astype(_F32) + 0.5) * res
+    o = sum(geometry._as_terms(origin)[1:], geometry._as_terms(origin)[0])
+    r = sum(geometry._as_terms(res)[1:], geometry._as_terms(res)[0])
+    cx = o[0] + (cols.astype(_F32) + 0.5) * r
+    cy = o[1] + (rows.astype(_F32) + 0.5) * r
     px, py = geometry.transform_points(transform, cx[None, :], cy[:, None])
     mx, my, inside = geometry.world_to_cell(px, py, mask_origin, mask_res, wm, hm)
     in_window = (((cols >= min_i) & (cols < max_i))[None, :] & ((rows >= min_j) & (rows < max_j))[:, None])
@@ -242,9 +276,9 @@ def _keepout_stack_one(cost, origin, res, stack, i, mask_origin, mask_res, state
     value = jnp.where(state.is_pose_lethal, jnp.uint8(config.lethal_override_cost), mask_cost)
   else:
     value = mask_cost
-  run = enabled & overlap
+  run = enabled & overlap & index_ok
   new_cost = jnp.where(run & write, value, cost)
-  return new_cost, _processed(state, run)
+  return new_cost, _with_error(_processed(state, run), ~jnp.asarray(index_ok))
 
 
 keepout_one.__doc__ = _keepout_stack_one.__doc__
@@ -280,8 +314,10 @@ def _aligned_slice(shape, padded_shape, origin, res, mask_origin, mask_res, wind
   h, w = shape
   hm, wm = padded_shape[0] - 2 * h, padded_shape[1] - 2 * w
   overlap, (x0, y0, x1, y1) = _same_frame_window((hm, wm), mask_origin, mask_res, origin, res, window)
+  r = geometry._as_terms(res)[0]          # the path only runs when res is exactly float32 == mask_res
   k0 = geometry.floor_div_exact(
-      [origin, *geometry.exact_product(jnp.ones((2,), _F32), 0.5 * res), -mask_origin], res)
+      [*geometry._as_terms(origin), *geometry.exact_product(jnp.ones((2,), _F32), 0.5 * r),
+       *[-t for t in geometry._as_terms(mask_origin)]], r)
   sx = jnp.clip(k0[0], -w, wm) + w
   sy = jnp.clip(k0[1], -h, hm) + h
   run = enabled & overlap
@@ -291,7 +327,7 @@ def _aligned_slice(shape, padded_shape, origin, res, mask_origin, mask_res, wind
 
 
 def _aligned_one(cost, origin, res, table, i, mask_origin, mask_res, state, window, enabled,
-                 *, config: KeepoutConfig):
+                 *, config: KeepoutConfig, index_ok=True):
   """keepout_one for a costmap whose resolution equals the mask's (same frame).
 
   With res == mask_res (as float32 values) the real quotient for master cell k
@@ -316,7 +352,7 @@ def _aligned_one(cost, origin, res, table, i, mask_origin, mask_res, state, wind
   """
   h, w = cost.shape
   sx, sy, col_ok, row_ok, run = _aligned_slice(cost.shape, table.shape[1:], origin, res, mask_origin,
-                                               mask_res, window, enabled)
+                                               mask_res, window, enabled & index_ok)
   m1 = jax.lax.dynamic_slice(table, (i, sy, sx), (1, h, w))[0]
   m1 = jnp.where(col_ok[None, :] & row_ok[:, None], m1, jnp.uint8(0))
   c1 = cost + jnp.uint8(1)
@@ -325,7 +361,7 @@ def _aligned_one(cost, origin, res, table, i, mask_origin, mask_res, state, wind
     new_cost = jnp.where(m1 > c1, value, cost)
   else:
     new_cost = jnp.maximum(c1, m1) - jnp.uint8(1)
-  return new_cost, _processed(state, run)
+  return new_cost, _with_error(_processed(state, run), ~jnp.asarray(index_ok))
 
 
 # SWAR helpers: four uint8 cells per uint32 word, per-byte arithmetic without carries
@@ -379,11 +415,11 @@ def _shifted_words(table):
 
 
 def _aligned_packed_one(cost, origin, res, words, i, mask_origin, mask_res, state, window, enabled,
-                        *, config: KeepoutConfig, padded_shape):
+                        *, config: KeepoutConfig, padded_shape, index_ok=True):
   """`_aligned_one` on uint32 words: same slice arithmetic, SWAR write rule (W % 4 == 0)."""
   h, w = cost.shape
   sx, sy, col_ok, row_ok, run = _aligned_slice(cost.shape, padded_shape, origin, res, mask_origin,
-                                               mask_res, window, enabled)
+                                               mask_res, window, enabled & index_ok)
   m1 = jax.lax.dynamic_slice(words, (sx % 4, i, sy, sx // 4), (1, 1, h, w // 4))[0, 0]
   col_bytes = jnp.where(col_ok, jnp.uint8(0xFF), jnp.uint8(0))
   m1 = jnp.where(row_ok[:, None], m1 & _pack(col_bytes)[None, :], _u32(0))
@@ -395,10 +431,19 @@ def _aligned_packed_one(cost, origin, res, words, i, mask_origin, mask_res, stat
   else:
     value = _bytes_minus_one(m1)
   new_cost = _unpack((c & ~write) | (value & write))
-  return new_cost, _processed(state, run)
+  return new_cost, _with_error(_processed(state, run), ~jnp.asarray(index_ok))
 
 
-def _aligned_batch(costmap, mask, idx, state, window, enabled, *, config: KeepoutConfig,
+def _robot_geometry(costmap: Costmap, mask: FilterMask):
+  """Per-robot geometry leaves for vmap: (origin parts, resolution parts) of the costmaps."""
+  return (costmap.origin, costmap.origin_lo, costmap.resolution, costmap.resolution_lo)
+
+
+def _mask_origin(mask: FilterMask, i):
+  return geometry.origin_terms(mask.origin[i], None if mask.origin_lo is None else mask.origin_lo[i])
+
+
+def _aligned_batch(costmap, mask, idx, idx_ok, state, window, enabled, *, config: KeepoutConfig,
                    loop: str = "auto", packed: bool | None = None):
   """The same-resolution keepout over a fleet (`_aligned_one` per robot).
 
@@ -422,15 +467,17 @@ def _aligned_batch(costmap, mask, idx, state, window, enabled, *, config: Keepou
   if packed:
     words = _shifted_words(table)
 
-    def one(cost, origin, res, i, st, win, en):
-      return _aligned_packed_one(cost, origin, res, words, i, mask.origin[i], mask.resolution[i], st, win,
-                                 en, config=config, padded_shape=table.shape[1:])
+    def one(cost, origin, origin_lo, res, res_lo, i, ok, st, win, en):
+      return _aligned_packed_one(cost, geometry.origin_terms(origin, origin_lo), res, words, i,
+                                 _mask_origin(mask, i), mask.resolution[i], st, win, en, config=config,
+                                 padded_shape=table.shape[1:], index_ok=ok)
   else:
-    def one(cost, origin, res, i, st, win, en):
-      return _aligned_one(cost, origin, res, table, i, mask.origin[i], mask.resolution[i], st, win, en,
-                          config=config)
+    def one(cost, origin, origin_lo, res, res_lo, i, ok, st, win, en):
+      return _aligned_one(cost, geometry.origin_terms(origin, origin_lo), res, table, i,
+                          _mask_origin(mask, i), mask.resolution[i], st, win, en, config=config,
+                          index_ok=ok)
 
-  args = (costmap.cost, costmap.origin, costmap.resolution, idx, state, window, enabled)
+  args = (costmap.cost, *_robot_geometry(costmap, mask), idx, idx_ok, state, window, enabled)
   if loop == "map":
     return jax.lax.map(lambda a: one(*a), args)
   if loop != "vmap":
@@ -438,10 +485,11 @@ def _aligned_batch(costmap, mask, idx, state, window, enabled, *, config: Keepou
   return jax.vmap(one)(*args)
 
 
-def _batched_inputs(costmap, mask, poses, mask_index, enabled, window, transform):
+def _batched_inputs(costmap, mask, poses, mask_index, enabled, window, transform, where):
+  check_costmap(costmap, where)
   b = costmap.num_robots
   h, w = costmap.cost.shape[1:]
-  idx, poses, enabled, transform = robot_inputs(mask, poses, b, mask_index, enabled, transform)
+  idx, idx_ok, poses, enabled, transform = robot_inputs(mask, poses, b, mask_index, enabled, transform)
   if window is None:
     window = jnp.tile(jnp.asarray([0, 0, w, h], jnp.int32), (b, 1))
   else:
@@ -453,7 +501,14 @@ def _batched_inputs(costmap, mask, poses, mask_index, enabled, window, transform
     window = jnp.broadcast_to(window.astype(jnp.int32), (b, 4))
     window = jnp.stack([jnp.maximum(window[:, 0], 0), jnp.maximum(window[:, 1], 0),
                         jnp.minimum(window[:, 2], w), jnp.minimum(window[:, 3], h)], axis=1)
-  return idx, poses, enabled, window, transform
+  return idx, idx_ok, poses, enabled, window, transform
+
+
+def _fill_error(state: KeepoutState, b: int) -> KeepoutState:
+  """A hand-built state without `error` gets an all-False one (same pytree every cycle)."""
+  if state.error is None:
+    state = dataclasses.replace(state, error=jnp.zeros((b,), bool))
+  return state
 
 
 def keepout_filter(costmap: Costmap, mask: FilterMask, poses, state: KeepoutState, *,
@@ -461,13 +516,17 @@ def keepout_filter(costmap: Costmap, mask: FilterMask, poses, state: KeepoutStat
                    config: KeepoutConfig = KeepoutConfig()) -> tuple[Costmap, KeepoutState]:
   """Nav2 KeepoutFilter::process over a fleet (spec §4.3-§4.4).
 
+  Jitted at the edge (config static); inside a caller's `jit` it inlines.
+
   Args:
     costmap: Costmap with cost uint8 [B, H, W] (the combined map after layers).
     mask: FilterMask with M masks (M = 1 shared, or a stack with mask_index).
     poses: float [B, 3] robot (x, y, yaw) in the costmap frame (used by the
       escape mode through the state, which `keepout_update_bounds` sets).
     state: KeepoutState [B].
-    mask_index: optional int [B], which mask each robot uses.
+    mask_index: optional int [B], which mask each robot uses. Concrete values
+      outside [0, M) raise; traced ones leave that robot's costmap and state
+      untouched and set `state.error` (never another mask).
     enabled: optional bool [B] or scalar (Nav2 `enabled` / toggle_filter); a
       disabled robot's costmap and state pass through unchanged.
     window: optional int [B, 4] or [4] (min_i, min_j, max_i, max_j) half-open
@@ -478,33 +537,49 @@ def keepout_filter(costmap: Costmap, mask: FilterMask, poses, state: KeepoutStat
 
   Returns:
     (Costmap with the new cost, new KeepoutState).
-  """
-  with jax.named_scope("keepout_filter"):
-    idx, poses, enabled, window, transform = _batched_inputs(
-        costmap, mask, poses, mask_index, enabled, window, transform)
-    del poses
 
-    def one(cost, origin, res, i, st, win, en, tf):
-      return _keepout_stack_one(cost, origin, res, mask.data, i, mask.origin[i], mask.resolution[i],
-                                st, win, en, tf, config=config)
+  Raises:
+    TypeError / ValueError: inputs of the wrong type, dtype or shape (e.g. a
+      Costmap whose cost is not uint8), or a concrete mask_index out of range.
+  """
+  if not isinstance(config, KeepoutConfig):
+    raise TypeError(f"config must be a KeepoutConfig; got {type(config).__name__}")
+  idx, idx_ok, poses, enabled, window, transform = _batched_inputs(
+      costmap, mask, poses, mask_index, enabled, window, transform, "keepout_filter")
+  del poses
+  state = _fill_error(state, costmap.num_robots)
+  return _keepout_filter_jit(costmap, mask, idx, idx_ok, state, window, enabled, transform, config=config)
+
+
+@functools.partial(jax.jit, static_argnames=("config",))
+def _keepout_filter_jit(costmap, mask, idx, idx_ok, state, window, enabled, transform, *, config):
+  with jax.named_scope("keepout_filter"):
+    def one(cost, origin, origin_lo, res, res_lo, i, ok, st, win, en, tf):
+      return _keepout_stack_one(cost, geometry.origin_terms(origin, origin_lo),
+                                geometry.resolution_terms(res, res_lo), mask.data, i,
+                                _mask_origin(mask, i), mask.resolution[i], st, win, en, tf,
+                                config=config, index_ok=ok)
 
     tf_axis = None if transform is None else 0
+    geo_axes = tuple(None if g is None else 0 for g in _robot_geometry(costmap, mask))
 
     def general(state):
-      args = (costmap.cost, costmap.origin, costmap.resolution, idx, state, window, enabled, transform)
+      args = (costmap.cost, *_robot_geometry(costmap, mask), idx, idx_ok, state, window, enabled, transform)
       b, h, w = costmap.cost.shape
       # Only the SE2 path needs chunking: the same-frame gather fuses well and runs
       # 2.4x faster as one vmap (H200: 172 vs 72 Gcell/s at B=16384, 200x200).
       if transform is None or b * h * w <= _GENERAL_CHUNK_CELLS:
-        return jax.vmap(one, in_axes=(0, 0, 0, 0, 0, 0, 0, tf_axis))(*args)
+        return jax.vmap(one, in_axes=(0, *geo_axes, 0, 0, 0, 0, 0, tf_axis))(*args)
       # The per-cell exact arithmetic keeps ~40 float32 temporaries per cell alive at
       # once (an SE2 fleet of 655 M cells asked XLA:GPU for 107 GiB): run in chunks.
       return jax.lax.map(lambda a: one(*a), args, batch_size=max(1, _GENERAL_CHUNK_CELLS // (h * w)))
 
     if transform is None and config.aligned_fast_path:
       aligned = jnp.all(mask.resolution[idx] == costmap.resolution)
+      if costmap.resolution_lo is not None:
+        aligned = aligned & jnp.all(costmap.resolution_lo == 0)
       cost, new_state = jax.lax.cond(
-          aligned, lambda st: _aligned_batch(costmap, mask, idx, st, window, enabled, config=config),
+          aligned, lambda st: _aligned_batch(costmap, mask, idx, idx_ok, st, window, enabled, config=config),
           general, state)
     else:
       cost, new_state = general(state)
@@ -516,6 +591,8 @@ def keepout_update_bounds(costmap: Costmap, mask: FilterMask, poses, state: Keep
                           transform=None, config: KeepoutConfig = KeepoutConfig()):
   """Nav2 KeepoutFilter::updateBounds over a fleet (spec §4.2).
 
+  Jitted at the edge like `keepout_filter`.
+
   Args:
     costmap: the costmap whose geometry (origin, resolution) the bounds use.
     mask, poses, state, mask_index, enabled, transform, config: as keepout_filter.
@@ -526,20 +603,34 @@ def keepout_update_bounds(costmap: Costmap, mask: FilterMask, poses, state: Keep
   Returns:
     (new KeepoutState, new bounds float32 [B, 4]).
   """
-  with jax.named_scope("keepout_update_bounds"):
-    b = costmap.num_robots
-    idx, poses, enabled, _, transform = _batched_inputs(
-        costmap, mask, poses, mask_index, enabled, None, transform)
-    bounds = jnp.asarray(bounds, _F32)
-    if bounds.shape != (b, 4):
-      raise ValueError(f"bounds must be float [B, 4] = ({b}, 4); got {tuple(bounds.shape)}")
-    new_mask = jnp.broadcast_to(jnp.asarray(False if new_mask is None else new_mask, bool), (b,))
+  if not isinstance(config, KeepoutConfig):
+    raise TypeError(f"config must be a KeepoutConfig; got {type(config).__name__}")
+  b = costmap.num_robots
+  idx, idx_ok, poses, enabled, _, transform = _batched_inputs(
+      costmap, mask, poses, mask_index, enabled, None, transform, "keepout_update_bounds")
+  bounds = jnp.asarray(bounds, _F32)
+  if bounds.shape != (b, 4):
+    raise ValueError(f"bounds must be float [B, 4] = ({b}, 4); got {tuple(bounds.shape)}")
+  new_mask = jnp.asarray(False if new_mask is None else new_mask)
+  if new_mask.dtype != jnp.bool_ or new_mask.shape not in ((), (b,)):
+    raise ValueError(f"new_mask must be a bool scalar or bool [B] = ({b},); got "
+                     f"{new_mask.dtype}{tuple(new_mask.shape)}")
+  new_mask = jnp.broadcast_to(new_mask, (b,))
+  state = _fill_error(state, b)
+  return _update_bounds_jit(costmap, mask, idx, idx_ok, poses, state, bounds, new_mask, enabled, transform,
+                            override_lethal_cost=config.override_lethal_cost)
 
-    def one(st, i, pose, bnd, origin, res, nm, en, tf):
+
+@functools.partial(jax.jit, static_argnames=("override_lethal_cost",))
+def _update_bounds_jit(costmap, mask, idx, idx_ok, poses, state, bounds, new_mask, enabled, transform, *,
+                       override_lethal_cost):
+  with jax.named_scope("keepout_update_bounds"):
+    def one(st, i, ok, pose, bnd, origin, res, nm, en, tf):
       return keepout_update_bounds_one(
           st, mask.data[i], mask.origin[i], mask.resolution[i], pose, bnd, origin, res, nm, en, tf,
-          override_lethal_cost=config.override_lethal_cost)
+          override_lethal_cost=override_lethal_cost,
+          mask_origin_lo=None if mask.origin_lo is None else mask.origin_lo[i], index_ok=ok)
 
     tf_axis = None if transform is None else 0
-    return jax.vmap(one, in_axes=(0, 0, 0, 0, 0, 0, 0, 0, tf_axis))(
-        state, idx, poses, bounds, costmap.origin, costmap.resolution, new_mask, enabled, transform)
+    return jax.vmap(one, in_axes=(0, 0, 0, 0, 0, 0, 0, 0, 0, tf_axis))(
+        state, idx, idx_ok, poses, bounds, costmap.origin, costmap.resolution, new_mask, enabled, transform)

@@ -7,8 +7,11 @@ the filters run on the combined map only. So filter output is never inflated.
 `plugins:` before the inflation layer (docs PR #972): it then runs on the
 primary map and its zones are inflated.
 
-The update window is the whole map each cycle (a full redraw), which is what a
-rolling local costmap and a freshly loaded global costmap do.
+Each call is one Nav2 cycle: every layer's and filter's updateBounds, then
+every updateCosts. The layers here redraw the whole map (a rolling local
+costmap and a freshly loaded global costmap do), so their bounds are the map's
+extent; the keepout filter's updateBounds then runs the robot-in-zone test of
+its escape mode (`override_lethal_cost`) before its process() writes the zones.
 """
 
 from __future__ import annotations
@@ -17,10 +20,12 @@ import dataclasses
 
 import jax
 import jax.numpy as jnp
+import numpy as np
 
 from jaxfilters import constants
 from jaxfilters.inflation import InflationConfig, inflate
-from jaxfilters.keepout import KeepoutConfig, KeepoutState, keepout_filter
+from jaxfilters import validate
+from jaxfilters.keepout import KeepoutConfig, KeepoutState, keepout_filter, keepout_update_bounds
 from jaxfilters.speed import SpeedResult, SpeedState, speed_filter
 from jaxfilters.static_layer import StaticLayerConfig, static_layer
 from jaxfilters.types import Costmap, FilterMask, _dataclass
@@ -72,7 +77,7 @@ def costmap_pipeline(static_data, origin, resolution, poses, *, config: LayersCo
                      obstacles=None, keepout_mask: FilterMask | None = None,
                      keepout_state: KeepoutState | None = None, speed_mask: FilterMask | None = None,
                      speed_state: SpeedState | None = None, mask_index=None,
-                     enabled=None) -> PipelineOutput:
+                     enabled=None, new_keepout_mask=None) -> PipelineOutput:
   """Static layer (+ obstacles) -> inflation -> filters on the combined map.
 
   Args:
@@ -86,6 +91,9 @@ def costmap_pipeline(static_data, origin, resolution, poses, *, config: LayersCo
     keepout_mask, keepout_state: keepout filter inputs (both or neither).
     speed_mask, speed_state: speed filter inputs (both or neither).
     mask_index, enabled: passed to the filters.
+    new_keepout_mask: optional bool [B] or scalar: a new keepout mask arrived
+      since the last cycle (Nav2's updateBounds then grows the bounds and
+      skips the robot-in-zone test this cycle).
 
   Returns:
     PipelineOutput.
@@ -102,7 +110,19 @@ def costmap_pipeline(static_data, origin, resolution, poses, *, config: LayersCo
         raise ValueError(f"obstacles must be bool {tuple(cost.shape)}; got {obstacles.dtype}{tuple(obstacles.shape)}")
       # ObstacleLayer uses max-combination: marking raises a cell to lethal.
       cost = jnp.where(obstacles, jnp.uint8(constants.LETHAL_OBSTACLE), cost)
-    primary = Costmap(cost, jnp.asarray(origin, jnp.float32), jnp.asarray(resolution, jnp.float32))
+    primary = _geometry(cost, origin, resolution)
+    if keepout_mask is not None:
+      # updateBounds pass (spec §2.5, §4.2): layers redraw the whole map.
+      b = cost.shape[0]
+      res = primary.resolution if primary.resolution_lo is None else (
+          primary.resolution + primary.resolution_lo[:, 0] + primary.resolution_lo[:, 1])
+      org = primary.origin
+      size = jnp.asarray([cost.shape[2], cost.shape[1]], jnp.float32)
+      bounds = jnp.concatenate([org, org + size[None, :] * res[:, None]], axis=1)
+      keepout_state, _ = keepout_update_bounds(primary, keepout_mask, poses, keepout_state,
+                                               jnp.broadcast_to(bounds, (b, 4)),
+                                               new_mask=new_keepout_mask, mask_index=mask_index,
+                                               enabled=enabled, config=config.keepout)
     if keepout_mask is not None and config.keepout_as_layer:
       primary, keepout_state = keepout_filter(primary, keepout_mask, poses, keepout_state,
                                               mask_index=mask_index, enabled=enabled, config=config.keepout)
@@ -116,3 +136,19 @@ def costmap_pipeline(static_data, origin, resolution, poses, *, config: LayersCo
     if speed_mask is not None:
       speed_state, speed = speed_filter(speed_mask, poses, speed_state, mask_index=mask_index, enabled=enabled)
     return PipelineOutput(primary, combined, keepout_state, speed_state, speed)
+
+
+def _geometry(cost, origin, resolution) -> Costmap:
+  """The primary map's Costmap; host float64 geometry is carried exactly (Costmap.create)."""
+  b = cost.shape[0]
+  if isinstance(origin, jax.core.Tracer) or isinstance(resolution, jax.core.Tracer):
+    return Costmap(cost, jnp.broadcast_to(jnp.asarray(origin, jnp.float32), (b, 2)),
+                   jnp.broadcast_to(jnp.asarray(resolution, jnp.float32), (b,)))
+  o = validate.float32_values(origin, "origin", owner="costmap_pipeline")
+  validate.resolution_value(resolution, owner="costmap_pipeline")
+  o64 = np.broadcast_to(np.asarray(origin, np.float64), (b, 2))
+  r64 = np.broadcast_to(np.asarray(resolution, np.float64), (b,))
+  del o
+  op, rp = validate.split_float64(o64), validate.split_float64(r64)
+  arr = lambda x: jnp.asarray(np.ascontiguousarray(x))
+  return Costmap(cost, arr(op[..., 0]), arr(rp[..., 0]), arr(op[..., 1:]), arr(rp[..., 1:]))

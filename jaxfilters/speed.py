@@ -10,12 +10,19 @@ explicit state in, new state plus a per-robot `changed` flag out:
 
 Range checks (percent outside [0, 100], absolute < 0 -> 0.0) are decided
 exactly on `d * multiplier + base` (error-free arithmetic), as Nav2 does in
-float64; the limit value itself is the float32 rounding of that double.
+float64; the limit value itself is the float32 rounding of that double, so
+|limit - Nav2's double| <= 2**-24 * |Nav2's double| (6e-6 at 100 %: the bound
+documented in README.md's float policy).
+
+Public functions are jitted at the edge (inline inside a caller's `jit`). A
+robot whose traced `mask_index` is outside [0, M) gets `valid` False,
+`error` True and its state untouched (eager calls raise instead).
 """
 
 from __future__ import annotations
 
 import dataclasses
+import functools
 
 import jax
 import jax.numpy as jnp
@@ -57,12 +64,17 @@ class SpeedResult:
     percentage: bool [B], True for percent of max speed, False for m/s.
     changed: bool [B], Nav2 would publish a SpeedLimit this cycle.
     valid: bool [B], a limit was computed this cycle (False off-mask, on an
-      unknown cell, for a mask whose type is not 1 or 2, or when disabled).
+      unknown cell, for a mask whose type is not 1 or 2, when disabled, or
+      on an error).
+    error: bool [B], the robot's traced mask_index was outside [0, M) (or,
+      with lookahead, its traced path length outside [0, N]): nothing was
+      computed and its state was kept. None only in a hand-built result.
   """
   speed_limit: jax.Array
   percentage: jax.Array
   changed: jax.Array
   valid: jax.Array
+  error: jax.Array | None = None
 
 
 @dataclasses.dataclass(frozen=True)
@@ -146,7 +158,7 @@ def speed_filter_one(state, data, mask_origin, mask_res, info, pose, enabled, tr
     xy = _transform_point(transform, xy)
   limit, valid = speed_limit_at_one(data, mask_origin, mask_res, info, xy)
   prev, changed, ok = _publish_step(state.speed_limit_prev, limit, valid, enabled)
-  out = SpeedResult(prev, info.type == constants.SPEED_FILTER_PERCENT, changed, ok)
+  out = SpeedResult(prev, info.type == constants.SPEED_FILTER_PERCENT, changed, ok, jnp.asarray(False))
   return dataclasses.replace(state, speed_limit_prev=prev), out
 
 
@@ -163,7 +175,7 @@ def _segment_distance(p, a, b):
 
 
 def speed_lookahead_one(state, data, mask_origin, mask_res, info, pose, path, path_len, new_path,
-                        velocity, enabled, *, config: LookaheadConfig):
+                        velocity, enabled, transform=None, *, config: LookaheadConfig):
   """SpeedFilter::process with path lookahead for one robot (spec §5.6).
 
   Args:
@@ -175,11 +187,17 @@ def speed_lookahead_one(state, data, mask_origin, mask_res, info, pose, path, pa
     new_path: bool [], a new path arrived (resets the cached start index).
     velocity: float32 [], smoothed |linear x| speed (m/s).
     enabled: bool [].
+    transform: float32 [3] T_mask_from_global or None: the pose and the path
+      are in the costmap frame and are moved into the mask frame for lookups
+      (distances are frame-independent under SE2).
     config: static LookaheadConfig.
 
   Returns:
     (new state, SpeedResult with scalar leaves).
   """
+  if transform is not None:
+    pose = jnp.concatenate([_transform_point(transform, pose[:2]), pose[2:]])
+    path = jnp.stack(geometry.transform_points(transform, path[:, 0], path[:, 1]), axis=-1)
   n = path.shape[0]
   v = jnp.abs(velocity)
   if config.max_decel < 0:
@@ -213,79 +231,131 @@ def speed_lookahead_one(state, data, mask_origin, mask_res, info, pose, path, pa
   prev, changed, ok = _publish_step(state.speed_limit_prev, limit, robot_valid, enabled)
   new_state = SpeedState(prev, jnp.where(has_path, start, state.path_start),
                          jnp.where(enabled & has_path, held, state.held_lookahead))
-  out = SpeedResult(prev, info.type == constants.SPEED_FILTER_PERCENT, changed, ok)
+  out = SpeedResult(prev, info.type == constants.SPEED_FILTER_PERCENT, changed, ok, jnp.asarray(False))
   return new_state, out
 
 
 def _common(mask, poses, state, mask_index, enabled, transform):
+  if not isinstance(state, SpeedState):
+    raise TypeError(f"state must be a SpeedState (SpeedState.create); got {type(state).__name__}")
   b = state.speed_limit_prev.shape[0]
   return (b, *robot_inputs(mask, poses, b, mask_index, enabled, transform))
 
 
 def _mask_leaves(mask: FilterMask, i):
-  return (mask.data[i], mask.origin[i], mask.resolution[i], jax.tree.map(lambda x: x[i], mask.info))
+  """(data [Hm, Wm], origin parts, resolution [], info) of mask i of the stack."""
+  origin = geometry.origin_terms(mask.origin[i], None if mask.origin_lo is None else mask.origin_lo[i])
+  return (mask.data[i], origin, mask.resolution[i], jax.tree.map(lambda x: x[i], mask.info))
+
+
+def guard_index(new_state, out, state, ok):
+  """Keeps a robot's state and marks its result invalid + error when its mask index is bad."""
+  kept = jax.tree.map(lambda a, b: jnp.where(ok, a, b), new_state, state)
+  out = dataclasses.replace(out, valid=out.valid & ok, error=~ok)
+  if hasattr(out, "changed"):
+    out = dataclasses.replace(out, changed=out.changed & ok)
+  return kept, out
 
 
 def speed_filter(mask: FilterMask, poses, state: SpeedState, *, mask_index=None, enabled=None,
                  transform=None) -> tuple[SpeedState, SpeedResult]:
   """Nav2 SpeedFilter over a fleet, at each robot's pose (spec §5.3-§5.4).
 
+  Jitted at the edge: an eager call compiles once per shape and runs with
+  memory independent of B beyond the outputs; inside a caller's `jit` it inlines.
+
   Args:
     mask: FilterMask of type 1 (percent) or 2 (m/s); M = 1 shared or a stack.
     poses: float [B, 3] robot (x, y, yaw).
     state: SpeedState [B].
-    mask_index: optional int [B], which mask each robot uses.
+    mask_index: optional int [B], which mask each robot uses (concrete values
+      outside [0, M) raise; traced ones give valid False and error True).
     enabled: optional bool [B] or scalar; a disabled robot publishes nothing.
     transform: optional [B, 3] or [3] T_mask_from_global for a mask in another frame.
 
   Returns:
     (new SpeedState, SpeedResult [B]).
   """
+  _, idx, idx_ok, poses, enabled, transform = _common(mask, poses, state, mask_index, enabled, transform)
+  return _speed_filter_jit(mask, poses, state, idx, idx_ok, enabled, transform)
+
+
+@jax.jit
+def _speed_filter_jit(mask, poses, state, idx, idx_ok, enabled, transform):
   with jax.named_scope("speed_filter"):
-    _, idx, poses, enabled, transform = _common(mask, poses, state, mask_index, enabled, transform)
+    def one(st, i, ok, pose, en, tf):
+      new, out = speed_filter_one(st, *_mask_leaves(mask, i), pose, en, tf)
+      return guard_index(new, out, st, ok)
 
-    def one(st, i, pose, en, tf):
-      return speed_filter_one(st, *_mask_leaves(mask, i), pose, en, tf)
-
-    return jax.vmap(one, in_axes=(0, 0, 0, 0, None if transform is None else 0))(
-        state, idx, poses, enabled, transform)
+    return jax.vmap(one, in_axes=(0, 0, 0, 0, 0, None if transform is None else 0))(
+        state, idx, idx_ok, poses, enabled, transform)
 
 
 def speed_filter_lookahead(mask: FilterMask, poses, state: SpeedState, paths, path_lengths,
                            velocities, *, new_path=None, mask_index=None, enabled=None,
+                           transform=None,
                            config: LookaheadConfig = LookaheadConfig()) -> tuple[SpeedState, SpeedResult]:
   """Nav2 SpeedFilter with `enable_path_lookahead` over a fleet (spec §5.6).
 
   The strictest (smallest non-zero) limit along each robot's path within the
   lookahead distance is published; robots with path_lengths 0 use the plain
-  filter.
+  filter. Jitted at the edge (config static).
 
   Args:
-    mask, poses, state, mask_index, enabled: as speed_filter (paths and mask in one frame).
-    paths: float [B, N, 2] path positions.
-    path_lengths: int [B], valid poses per path.
+    mask, poses, state, mask_index, enabled: as speed_filter.
+    paths: float [B, N, 2] path positions, in the same frame as the poses.
+    path_lengths: int [B], valid poses per path, each in [0, N].
     velocities: float [B], smoothed odometry linear speed (m/s).
     new_path: optional bool [B] or scalar, a new path arrived this cycle.
+    transform: optional [B, 3] or [3] T_mask_from_global: poses and paths are
+      in the costmap frame, the mask in another (as speed_filter).
     config: static LookaheadConfig.
 
   Returns:
     (new SpeedState, SpeedResult [B]).
+
+  Raises:
+    ValueError: wrong shapes or dtypes, or (concrete) path_lengths outside [0, N].
   """
+  if not isinstance(config, LookaheadConfig):
+    raise TypeError(f"config must be a LookaheadConfig; got {type(config).__name__}")
+  b, idx, idx_ok, poses, enabled, transform = _common(mask, poses, state, mask_index, enabled, transform)
+  paths = jnp.asarray(paths)
+  if paths.ndim != 3 or paths.shape[0] != b or paths.shape[2] != 2 or not jnp.issubdtype(paths.dtype, jnp.floating):
+    raise ValueError(f"paths must be float [B, N, 2] with B = {b}; got {paths.dtype}{tuple(paths.shape)}")
+  paths = paths.astype(_F32)
+  lengths = jnp.asarray(path_lengths)
+  if lengths.shape != (b,) or not jnp.issubdtype(lengths.dtype, jnp.integer):
+    raise ValueError(f"path_lengths must be int [B] = ({b},); got {lengths.dtype}{tuple(lengths.shape)}")
+  if not isinstance(lengths, jax.core.Tracer):
+    host = np.asarray(lengths)
+    bad = np.nonzero((host < 0) | (host > paths.shape[1]))[0]
+    if bad.size:
+      raise ValueError(f"path_lengths must lie in [0, N = {paths.shape[1]}]; robots {bad[:8].tolist()} "
+                       f"have {host[bad[:8]].tolist()}")
+  vel = jnp.asarray(velocities, _F32)
+  if vel.shape != (b,):
+    raise ValueError(f"velocities must be float [B] = ({b},); got {tuple(vel.shape)}")
+  new_path = jnp.asarray(False if new_path is None else new_path)
+  if new_path.dtype != jnp.bool_ or new_path.shape not in ((), (b,)):
+    raise ValueError(f"new_path must be a bool scalar or bool [B] = ({b},); got "
+                     f"{new_path.dtype}{tuple(new_path.shape)}")
+  new_path = jnp.broadcast_to(new_path, (b,))
+  return _lookahead_jit(mask, poses, state, paths, lengths.astype(jnp.int32), vel, new_path, idx, idx_ok,
+                        enabled, transform, config=config)
+
+
+@functools.partial(jax.jit, static_argnames=("config",))
+def _lookahead_jit(mask, poses, state, paths, lengths, vel, new_path, idx, idx_ok, enabled, transform, *,
+                   config):
   with jax.named_scope("speed_filter_lookahead"):
-    b, idx, poses, enabled, _ = _common(mask, poses, state, mask_index, enabled, None)
-    paths = jnp.asarray(paths, _F32)
-    if paths.ndim != 3 or paths.shape[0] != b or paths.shape[2] != 2:
-      raise ValueError(f"paths must be float [B, N, 2] with B = {b}; got {tuple(paths.shape)}")
-    lengths = jnp.asarray(path_lengths)
-    if lengths.shape != (b,) or not jnp.issubdtype(lengths.dtype, jnp.integer):
-      raise ValueError(f"path_lengths must be int [B] = ({b},); got {lengths.dtype}{tuple(lengths.shape)}")
-    vel = jnp.asarray(velocities, _F32)
-    if vel.shape != (b,):
-      raise ValueError(f"velocities must be float [B] = ({b},); got {tuple(vel.shape)}")
-    new_path = jnp.broadcast_to(jnp.asarray(False if new_path is None else new_path, bool), (b,))
+    # Traced lengths outside [0, N] are a value problem: such a robot is flagged, not clipped.
+    len_ok = (lengths >= 0) & (lengths <= paths.shape[1])
 
-    def one(st, i, pose, path, n, npth, v, en):
-      return speed_lookahead_one(st, *_mask_leaves(mask, i), pose, path, n, npth, v, en, config=config)
+    def one(st, i, ok, pose, path, n, npth, v, en, tf):
+      new, out = speed_lookahead_one(st, *_mask_leaves(mask, i), pose, path, jnp.where(ok, n, 0), npth, v,
+                                     en, tf, config=config)
+      return guard_index(new, out, st, ok)
 
-    return jax.vmap(one)(state, idx, poses, paths, jnp.clip(lengths.astype(jnp.int32), 0, paths.shape[1]),
-                         new_path, vel, enabled)
+    return jax.vmap(one, in_axes=(0, 0, 0, 0, 0, 0, 0, 0, 0, None if transform is None else 0))(
+        state, idx, idx_ok & len_ok, poses, paths, lengths, new_path, vel, enabled, transform)

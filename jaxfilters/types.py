@@ -19,7 +19,9 @@ import jax.numpy as jnp
 import numpy as np
 
 from jaxfilters import constants
+from jaxfilters import validate
 from jaxfilters.grid import OccupancyGrid
+from jaxfilters.validate import short_repr
 
 
 def _dataclass(cls):
@@ -54,16 +56,31 @@ class FilterInfo:
     """Builds a scalar FilterInfo; base and multiplier are rounded to float32 like the message.
 
     Raises:
-      ValueError: unknown type code, or a non-finite base or multiplier.
+      ValueError: unknown type code; a base or multiplier that is not finite in
+        float32 (NaN, beyond 3.4e38, or a non-zero value below 1.18e-38 that
+        the device would flush to 0); or a pair for which `d * multiplier +
+        base` overflows float32 for some mask value d in -1..100 (the filter
+        would report inf or NaN as a valid limit).
     """
-    if int(type) not in constants.FILTER_TYPES or int(type) != type:
+    try:
+      type_ok = int(type) == type and int(type) in constants.FILTER_TYPES
+    except (TypeError, ValueError, OverflowError):
+      type_ok = False
+    if not type_ok:
       raise ValueError(f"FilterInfo type must be one of {constants.FILTER_TYPES} "
-                       f"(0 keepout, 1 speed %, 2 speed m/s, 3 binary, 4 zone); got {type!r}")
-    for name, v in (("base", base), ("multiplier", multiplier)):
-      if not np.isfinite(float(v)):
-        raise ValueError(f"FilterInfo {name} must be finite; got {v!r}")
-    return cls(jnp.asarray(int(type), jnp.int32), jnp.asarray(_f32(base)),
-               jnp.asarray(_f32(multiplier)))
+                       f"(0 keepout, 1 speed %, 2 speed m/s, 3 binary, 4 zone); got {short_repr(type)}")
+    b32 = validate.float32_values(base, "base", owner="FilterInfo.create")
+    m32 = validate.float32_values(multiplier, "multiplier", owner="FilterInfo.create")
+    if b32.shape != () or m32.shape != ():
+      raise ValueError(f"FilterInfo.create: base and multiplier must be scalars; got shapes "
+                       f"{b32.shape} and {m32.shape}")
+    with np.errstate(over="ignore", invalid="ignore"):
+      extremes = np.array([-1.0, 100.0], np.float32) * m32 + b32
+    if not np.all(np.isfinite(extremes)):
+      raise ValueError(f"FilterInfo.create: d * multiplier + base must stay finite in float32 for "
+                       f"mask values d in -1..100; got base {short_repr(base)}, multiplier "
+                       f"{short_repr(multiplier)}")
+    return cls(jnp.asarray(int(type), jnp.int32), jnp.asarray(b32), jnp.asarray(m32))
 
 
 @_dataclass
@@ -75,21 +92,28 @@ class FilterMask:
 
   Attributes:
     data: int8 [M, H, W], OccupancyGrid values; row 0 is the lowest y.
-    origin: float32 [M, 2], world (x, y) of the lower-left corner of cell (0, 0).
+    origin: float32 [M, 2], world (x, y) of the lower-left corner of cell (0, 0)
+      (the float32 rounding of the host double).
     resolution: float32 [M], metres per cell (float32, as nav_msgs stores it).
     info: FilterInfo with leaves [M].
+    origin_lo: float32 [M, 2, 2] or None: the (mid, lo) float32 parts that,
+      added to `origin`, give the host float64 origin exactly
+      (`validate.split_float64`); None means the origin is exactly float32.
   """
   data: jax.Array
   origin: jax.Array
   resolution: jax.Array
   info: FilterInfo
+  origin_lo: jax.Array | None = None
 
   @property
   def num_masks(self) -> int:
+    """M, the number of masks in the stack."""
     return self.data.shape[0]
 
   @property
   def shape(self) -> tuple[int, int]:
+    """(H, W) of every mask in the stack."""
     return tuple(self.data.shape[1:])
 
   @classmethod
@@ -97,24 +121,45 @@ class FilterMask:
              infos: FilterInfo | Sequence[FilterInfo]) -> "FilterMask":
     """Stacks one or more OccupancyGrids with their FilterInfo into a device mask.
 
+    Every grid is re-validated here (a grid built without `OccupancyGrid.create`
+    may hold anything): integer cell values that fit int8 (never wrapped),
+    a non-empty [H, W], a resolution that is > 0 and a normal float32, and an
+    origin whose float64 value is carried exactly.
+
     Args:
       grids: one grid, or a sequence of grids of the same [H, W].
       infos: one FilterInfo for all grids, or one per grid.
 
     Raises:
-      ValueError: empty input, grids of different shapes, or a count mismatch.
-      TypeError: a grid that is not an OccupancyGrid.
+      ValueError: empty input, grids of different shapes, a count mismatch, or
+        a bad value in a grid (named with the grid's position).
+      TypeError: a grid that is not an OccupancyGrid or an info that is not a FilterInfo.
     """
     if isinstance(grids, OccupancyGrid):
       grids = [grids]
     grids = list(grids)
     if not grids:
       raise ValueError("FilterMask.create needs at least one OccupancyGrid; got none")
-    for g in grids:
+    datas, origins, resolutions = [], [], []
+    for k, g in enumerate(grids):
       if not isinstance(g, OccupancyGrid):
         raise TypeError(f"FilterMask.create expects OccupancyGrid objects (see jaxfilters.load_map); "
                         f"got {type(g).__name__}")
-    shapes = {g.data.shape for g in grids}
+      owner = f"FilterMask.create grid {k}"
+      arr = np.asarray(g.data)
+      if arr.ndim != 2 or arr.shape[0] == 0 or arr.shape[1] == 0:
+        raise ValueError(f"{owner}: data must be a non-empty [H, W] array; got shape {arr.shape}")
+      datas.append(validate.int_values(arr, "data", lo=-128, hi=127, owner=owner).astype(np.int8))
+      resolutions.append(validate.resolution_value(g.resolution, owner=owner))
+      try:
+        org = np.asarray(g.origin, np.float64)
+      except (TypeError, ValueError):
+        org = np.zeros((0,))
+      if org.ndim != 1 or org.shape[0] not in (2, 3):
+        raise ValueError(f"{owner}: origin must be (x, y) or (x, y, yaw); got {short_repr(g.origin)}")
+      validate.float32_values(org[:2], "origin", owner=owner)
+      origins.append(org[:2])
+    shapes = {d.shape for d in datas}
     if len(shapes) != 1:
       raise ValueError(f"all masks in one FilterMask must share one [H, W]; got shapes {sorted(shapes)}")
     if isinstance(infos, FilterInfo):
@@ -122,21 +167,34 @@ class FilterMask:
     infos = list(infos)
     if len(infos) != len(grids):
       raise ValueError(f"need one FilterInfo or one per grid ({len(grids)}); got {len(infos)}")
+    for i in infos:
+      if not isinstance(i, FilterInfo):
+        raise TypeError(f"FilterMask.create expects FilterInfo objects (FilterInfo.create); got "
+                        f"{type(i).__name__}")
     info = FilterInfo(
         type=jnp.asarray(np.array([int(i.type) for i in infos], np.int32)),
         base=jnp.asarray(_f32([float(i.base) for i in infos])),
         multiplier=jnp.asarray(_f32([float(i.multiplier) for i in infos])))
+    try:
+      parts = validate.split_float64(np.stack(origins))
+    except ValueError as e:
+      raise ValueError(f"FilterMask.create: origin: {e}") from None
     return cls(
-        data=jnp.asarray(np.stack([g.data for g in grids]).astype(np.int8)),
-        origin=jnp.asarray(_f32([g.origin[:2] for g in grids])),
-        resolution=jnp.asarray(_f32([g.resolution for g in grids])),
-        info=info)
+        data=jnp.asarray(np.stack(datas)),
+        origin=jnp.asarray(np.ascontiguousarray(parts[..., 0])),
+        resolution=jnp.asarray(np.stack(resolutions).astype(np.float32)),
+        info=info,
+        origin_lo=jnp.asarray(np.ascontiguousarray(parts[..., 1:])))
 
   def with_data(self, data) -> "FilterMask":
     """Returns this mask with new cell contents of the same shape (no recompile).
 
+    Args:
+      data: integer [M, H, W] (or [H, W] for M = 1) values that fit int8.
+
     Raises:
-      ValueError: data of another shape, or values outside int8.
+      ValueError: data of another shape, a non-integer dtype (floats such as
+        99.9 or NaN are refused, never truncated), or values outside int8.
     """
     arr = np.asarray(data)
     if arr.ndim == 2:
@@ -144,34 +202,83 @@ class FilterMask:
     if arr.shape != tuple(self.data.shape):
       raise ValueError(f"new mask data must have shape {tuple(self.data.shape)} (or [H, W] "
                        f"for M = 1); got {arr.shape}")
-    if arr.size and (arr.min() < -128 or arr.max() > 127):
-      raise ValueError("new mask data must fit int8 (OccupancyGrid values -1..100)")
+    arr = validate.int_values(arr, "new mask data", lo=-128, hi=127, owner="FilterMask.with_data")
     return dataclasses.replace(self, data=jnp.asarray(arr.astype(np.int8)))
 
 
+def check_mask(mask: FilterMask, where: str) -> None:
+  """Static checks of a FilterMask pytree that reaches a public function (works under jit).
+
+  Raises:
+    TypeError: not a FilterMask.
+    ValueError: wrong dtypes or shapes of its leaves (a hand-built pytree).
+  """
+  if not isinstance(mask, FilterMask):
+    raise TypeError(f"{where}: mask must be a FilterMask (FilterMask.create); got {type(mask).__name__}")
+  d = mask.data
+  if getattr(d, "ndim", None) != 3 or d.dtype != jnp.int8:
+    raise ValueError(f"{where}: mask.data must be int8 [M, H, W]; got {getattr(d, 'dtype', None)}"
+                     f"{tuple(getattr(d, 'shape', ()))}")
+  m = d.shape[0]
+  expect = {"origin": ((m, 2), "floating"), "resolution": ((m,), "floating"),
+            "info.type": ((m,), "integer"), "info.base": ((m,), "floating"),
+            "info.multiplier": ((m,), "floating")}
+  leaves = {"origin": mask.origin, "resolution": mask.resolution, "info.type": mask.info.type,
+            "info.base": mask.info.base, "info.multiplier": mask.info.multiplier}
+  for name, (shape, kind) in expect.items():
+    v = leaves[name]
+    dt = getattr(v, "dtype", None)
+    ok_kind = dt is not None and jnp.issubdtype(dt, jnp.floating if kind == "floating" else jnp.integer)
+    if tuple(getattr(v, "shape", ())) != shape or not ok_kind:
+      raise ValueError(f"{where}: mask.{name} must be {kind} {shape}; got {dt}{tuple(getattr(v, 'shape', ()))}")
+  if mask.origin_lo is not None and tuple(mask.origin_lo.shape) != (m, 2, 2):
+    raise ValueError(f"{where}: mask.origin_lo must be float32 ({m}, 2, 2) or None; got "
+                     f"{tuple(mask.origin_lo.shape)}")
+
+
 def resolve_mask_index(mask: FilterMask, mask_index: jax.Array | None,
-                       num_robots: int) -> jax.Array:
-  """Returns int32 [B]: which mask of the stack each robot uses.
+                       num_robots: int) -> tuple[jax.Array, jax.Array]:
+  """Which mask of the stack each robot uses, and whether that index is in range.
 
   A shared mask (mask_index None) must have M == 1. The [M, H, W] data stack
   is never copied per robot: kernels receive the stack and this index.
 
+  Concrete indices (numpy, Python or concrete jax values: an eager call) are
+  checked here and an out-of-range one raises. Traced indices (inside a
+  caller's `jit`) cannot be checked on the host: a robot whose index is
+  outside [0, M) gets index 0 *for memory safety only* and `ok` False, and
+  every filter then leaves that robot untouched (no write, `valid` False) and
+  sets its `error` flag. An index is never clamped onto another mask.
+
+  Returns:
+    (index int32 [B] safe to gather with, ok bool [B]).
+
   Raises:
-    ValueError: a stack of several masks without mask_index, or a mask_index
-      that is not an integer [B] array.
+    ValueError: a stack of several masks without mask_index, a mask_index that
+      is not an integer [B] array, or (eager) one outside [0, M).
   """
+  m = mask.num_masks
   if mask_index is None:
-    if mask.num_masks != 1:
-      raise ValueError(f"a FilterMask stack of {mask.num_masks} masks needs mask_index [B] "
+    if m != 1:
+      raise ValueError(f"a FilterMask stack of {m} masks needs mask_index [B] "
                        "to say which mask each robot uses; got mask_index=None")
-    idx = jnp.zeros((num_robots,), jnp.int32)
-  else:
-    idx = jnp.asarray(mask_index)
-    if idx.shape != (num_robots,) or not jnp.issubdtype(idx.dtype, jnp.integer):
+    return jnp.zeros((num_robots,), jnp.int32), jnp.ones((num_robots,), bool)
+  if not isinstance(mask_index, jax.core.Tracer):
+    host = np.asarray(mask_index)
+    if host.shape != (num_robots,) or not (np.issubdtype(host.dtype, np.integer)):
       raise ValueError(f"mask_index must be an integer array of shape ({num_robots},); "
-                       f"got {idx.dtype}{tuple(idx.shape)}")
-    idx = idx.astype(jnp.int32)
-  return idx
+                       f"got {host.dtype}{tuple(host.shape)}")
+    bad = np.nonzero((host < 0) | (host >= m))[0]
+    if bad.size:
+      raise ValueError(f"mask_index must lie in [0, {m}) (the FilterMask holds {m} masks); robots "
+                       f"{bad[:8].tolist()}{' ...' if bad.size > 8 else ''} have "
+                       f"{host[bad[:8]].tolist()}")
+  idx = jnp.asarray(mask_index)
+  if idx.shape != (num_robots,) or not jnp.issubdtype(idx.dtype, jnp.integer):
+    raise ValueError(f"mask_index must be an integer array of shape ({num_robots},); "
+                     f"got {idx.dtype}{tuple(idx.shape)}")
+  ok = (idx >= 0) & (idx < m)
+  return jnp.where(ok, idx, 0).astype(jnp.int32), ok
 
 
 @_dataclass
@@ -181,59 +288,97 @@ class Costmap:
   Attributes:
     cost: uint8 [B, H, W], Nav2 cost values (0..252, 253, 254, 255).
     origin: float32 [B, 2], world (x, y) of the lower-left corner of cell (0, 0),
-      per robot (a rolling window moves it; a global map repeats it).
-    resolution: float32 [B], metres per cell.
+      per robot (a rolling window moves it; a global map repeats it); the
+      float32 rounding of the host value.
+    resolution: float32 [B], metres per cell (float32 rounding).
+    origin_lo: float32 [B, 2, 2] or None: the (mid, lo) parts that make the
+      host float64 origin exact (`validate.split_float64`); None = exactly float32.
+    resolution_lo: float32 [B, 2] or None: the same for the resolution (Nav2's
+      costmap resolution is a double parameter such as 0.05).
   """
   cost: jax.Array
   origin: jax.Array
   resolution: jax.Array
+  origin_lo: jax.Array | None = None
+  resolution_lo: jax.Array | None = None
 
   @property
   def num_robots(self) -> int:
+    """B, the number of costmaps in the batch."""
     return self.cost.shape[0]
 
   @classmethod
   def create(cls, cost, origin, resolution) -> "Costmap":
-    """Validates and builds a batch of costmaps.
+    """Validates and builds a batch of costmaps, keeping float64 geometry exact.
 
     Args:
       cost: uint8 [B, H, W] (or [H, W] for B = 1).
-      origin: [B, 2] or [2] (broadcast to every robot).
-      resolution: [B] or scalar (broadcast).
+      origin: [B, 2] or [2] (broadcast to every robot), metres; a float64
+        value (Nav2's costmap origin is a double) is carried exactly.
+      resolution: [B] or scalar (broadcast), metres per cell; float64 kept exactly.
 
     Raises:
-      ValueError: wrong rank or dtype, batch mismatch, resolution not > 0.
+      ValueError: wrong rank or dtype, batch mismatch, an empty grid, a
+        resolution not > 0 or not a normal float32, a non-finite origin.
     """
     c = np.asarray(cost)
     if c.ndim == 2:
       c = c[None]
-    if c.ndim != 3:
-      raise ValueError(f"cost must be uint8 [B, H, W]; got shape {c.shape}")
+    if c.ndim != 3 or 0 in c.shape:
+      raise ValueError(f"cost must be a non-empty uint8 [B, H, W]; got shape {c.shape}")
     if c.dtype != np.uint8:
       raise ValueError(f"cost must have dtype uint8 (Nav2 costs 0..255); got {c.dtype}")
     b = c.shape[0]
-    o = _f32(origin)
-    if o.shape == (2,):
-      o = np.broadcast_to(o, (b, 2))
-    if o.shape != (b, 2):
-      raise ValueError(f"origin must be [B, 2] = ({b}, 2) or [2]; got {o.shape}")
-    r = _f32(resolution)
-    if r.ndim == 0:
-      r = np.broadcast_to(r, (b,))
-    if r.shape != (b,):
-      raise ValueError(f"resolution must be [B] = ({b},) or a scalar; got {r.shape}")
-    if not np.all(np.isfinite(r)) or np.any(r <= 0):
-      raise ValueError(f"resolution must be finite and > 0; got {r}")
-    if not np.all(np.isfinite(o)):
-      raise ValueError("origin must be finite")
-    return cls(jnp.asarray(c), jnp.asarray(np.ascontiguousarray(o)),
-               jnp.asarray(np.ascontiguousarray(r)))
+    o = np.asarray(validate.float32_values(origin, "origin", owner="Costmap.create").shape)
+    o64 = np.asarray(origin, np.float64)
+    if o64.shape == (2,):
+      o64 = np.broadcast_to(o64, (b, 2))
+    if o64.shape != (b, 2):
+      raise ValueError(f"Costmap.create: origin must be [B, 2] = ({b}, 2) or [2]; got {tuple(o)}")
+    validate.resolution_value(resolution, owner="Costmap.create")
+    r64 = np.asarray(resolution, np.float64)
+    if r64.ndim == 0:
+      r64 = np.broadcast_to(r64, (b,))
+    if r64.shape != (b,):
+      raise ValueError(f"Costmap.create: resolution must be [B] = ({b},) or a scalar; got {r64.shape}")
+    try:
+      op = validate.split_float64(o64)
+      rp = validate.split_float64(r64)
+    except ValueError as e:
+      raise ValueError(f"Costmap.create: {e}") from None
+    arr = lambda x: jnp.asarray(np.ascontiguousarray(x))
+    return cls(jnp.asarray(c), arr(op[..., 0]), arr(rp[..., 0]), arr(op[..., 1:]), arr(rp[..., 1:]))
 
   @classmethod
   def from_grid(cls, grid: OccupancyGrid, cost, num_robots: int) -> "Costmap":
     """A global costmap with `grid`'s geometry, repeated for `num_robots` robots."""
     c = np.broadcast_to(np.asarray(cost, np.uint8), (num_robots, *np.shape(cost)[-2:]))
     return cls.create(np.ascontiguousarray(c), grid.origin[:2], grid.resolution)
+
+
+def check_costmap(costmap: Costmap, where: str) -> None:
+  """Static checks of a Costmap pytree that reaches a public function (works under jit).
+
+  Raises:
+    TypeError: not a Costmap.
+    ValueError: cost not uint8 [B, H, W] (int32 or float "costs" would give
+      values outside 0..255), or geometry leaves of the wrong shape or dtype.
+  """
+  if not isinstance(costmap, Costmap):
+    raise TypeError(f"{where}: costmap must be a Costmap (Costmap.create); got {type(costmap).__name__}")
+  c = costmap.cost
+  if getattr(c, "ndim", None) != 3 or c.dtype != jnp.uint8:
+    raise ValueError(f"{where}: costmap.cost must be uint8 [B, H, W] (Nav2 costs 0..255); got "
+                     f"{getattr(c, 'dtype', None)}{tuple(getattr(c, 'shape', ()))}")
+  b = c.shape[0]
+  for name, v, shape in (("origin", costmap.origin, (b, 2)), ("resolution", costmap.resolution, (b,)),
+                         ("origin_lo", costmap.origin_lo, (b, 2, 2)),
+                         ("resolution_lo", costmap.resolution_lo, (b, 2))):
+    if v is None and name.endswith("_lo"):
+      continue
+    dt = getattr(v, "dtype", None)
+    if tuple(getattr(v, "shape", ())) != shape or dt is None or not jnp.issubdtype(dt, jnp.floating):
+      raise ValueError(f"{where}: costmap.{name} must be float {shape}; got {dt}{tuple(getattr(v, 'shape', ()))}")
 
 
 def check_poses(poses: Any, num_robots: int) -> jax.Array:
@@ -264,14 +409,17 @@ def robot_inputs(mask: FilterMask, poses: Any, num_robots: int, mask_index=None,
       (x, y, yaw) as [3] or [B, 3].
 
   Returns:
-    (mask index int32 [B], poses float32 [B, 3], enabled bool [B],
-     transform float32 [B, 3] or None).
+    (mask index int32 [B], index in range bool [B] (see resolve_mask_index),
+     poses float32 [B, 3], enabled bool [B], transform float32 [B, 3] or None).
 
   Raises:
-    ValueError: any of them with the wrong shape or dtype.
+    ValueError: any of them with the wrong shape or dtype, or (eager) a
+      mask_index outside [0, M).
+    TypeError: mask is not a FilterMask.
   """
   b = num_robots
-  idx = resolve_mask_index(mask, mask_index, b)
+  check_mask(mask, "filter input")
+  idx, idx_ok = resolve_mask_index(mask, mask_index, b)
   poses = check_poses(poses, b)
   en = jnp.asarray(True if enabled is None else enabled)
   if en.dtype != jnp.bool_ or en.shape not in ((), (b,)):
@@ -283,4 +431,4 @@ def robot_inputs(mask: FilterMask, poses: Any, num_robots: int, mask_index=None,
       raise ValueError(f"transform must be T_mask_from_global (x, y, yaw) of shape (3,) or ({b}, 3); "
                        f"got {tuple(transform.shape)}")
     transform = jnp.broadcast_to(transform, (b, 3))
-  return idx, poses, en, transform
+  return idx, idx_ok, poses, en, transform

@@ -108,3 +108,27 @@ def int_values(value: Any, name: str, *, lo: int, hi: int, owner: str = "") -> n
   if arr.size and (arr.min() < lo or arr.max() > hi):
     raise ValueError(f"{where} must lie in [{lo}, {hi}]; got min {arr.min()} max {arr.max()}")
   return arr
+
+
+def split_float64(x) -> "np.ndarray":
+  """Host float64 -> float32 [..., 3] parts (hi, mid, lo) whose exact sum is x.
+
+  Raises:
+    ValueError: x not finite in float32 terms, or so small that a part would be
+      subnormal on the device (the sum would no longer be x).
+  """
+  x = np.asarray(x, np.float64)
+  with np.errstate(over="ignore", under="ignore"):
+    hi = x.astype(np.float32)
+    r1 = x - hi.astype(np.float64)
+    mid = r1.astype(np.float32)
+    lo = (r1 - mid.astype(np.float64)).astype(np.float32)
+  tiny = np.finfo(np.float32).tiny
+  parts = np.stack([hi, mid, lo], axis=-1)
+  exact = (hi.astype(np.float64) + mid.astype(np.float64) + lo.astype(np.float64)) == x
+  normal = np.all((parts == 0) | (np.abs(parts) >= tiny), axis=-1)
+  if not (np.all(np.isfinite(hi)) and np.all(exact) and np.all(normal)):
+    bad = x[~(exact & normal & np.isfinite(hi))] if x.ndim else x
+    raise ValueError(f"value {np.ravel(bad)[:3].tolist()} cannot be carried exactly on the device as "
+                     "three normal float32 parts (|x| must lie in [1e-31, 3.4e38] or be 0)")
+  return parts

@@ -11,7 +11,12 @@ force after Nav2's rules:
   nothing; the first in-mask cycle always applies a state (an event 0 too);
 * a zone id with no configured row is an error in Nav2 (it throws): here the
   robot's state is left untouched and `error` is set (value problems are masked,
-  STYLE.md habit 5).
+  STYLE.md habit 5);
+* a mask whose info type is not 4 (zone parameter) is refused by Nav2: the
+  filter is inert for that robot (state kept, no event, no error);
+* a traced `mask_index` outside [0, M) keeps the robot's state and sets `error`.
+
+`zone_filter` is jitted at the edge (inlines inside a caller's `jit`).
 """
 
 from __future__ import annotations
@@ -22,6 +27,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
+from jaxfilters import constants
 from jaxfilters import geometry
 from jaxfilters.speed import _mask_leaves, _transform_point
 from jaxfilters.types import FilterMask, _dataclass, robot_inputs
@@ -114,7 +120,8 @@ class ZoneResult:
     zone: int32 [B], the zone id in force.
     params: float32 [B, P], the parameter values in force.
     event: bool [B], Nav2 would publish a UInt8 state event (value `zone`).
-    error: bool [B], the mask named a zone with no configuration (Nav2 throws).
+    error: bool [B], the mask named a zone with no configuration (Nav2 throws),
+      or the robot's traced mask_index was outside [0, M).
   """
   zone: jax.Array
   params: jax.Array
@@ -131,7 +138,9 @@ def _apply(table, prev_zone, prev_params, new_zone):
 
 def zone_filter_one(state, table, data, mask_origin, mask_res, info, pose, enabled, transform):
   """ZoneParameterFilter::process for one robot (scalar leaves; see module docstring)."""
-  del info  # Nav2 only WARNs on non-default base/multiplier and ignores them.
+  # Nav2 only WARNs on non-default base/multiplier and ignores them; a type other
+  # than 4 is refused, so such a mask drives nothing.
+  enabled = enabled & (info.type == constants.ZONE_PARAMETER_FILTER)
   hm, wm = data.shape
   xy = pose[:2] if transform is None else _transform_point(transform, pose[:2])
   mx, my, inside = geometry.world_to_cell(xy[0], xy[1], mask_origin, mask_res, wm, hm)
@@ -153,10 +162,11 @@ def zone_filter_one(state, table, data, mask_origin, mask_res, info, pose, enabl
 
 def zone_filter(mask: FilterMask, poses, state: ZoneState, table: ZoneTable, *, mask_index=None,
                 enabled=None, transform=None) -> tuple[ZoneState, ZoneResult]:
-  """Nav2 ZoneParameterFilter over a fleet.
+  """Nav2 ZoneParameterFilter over a fleet. Jitted at the edge.
 
   Args:
-    mask: FilterMask (type 4; base/multiplier are ignored like Nav2 does).
+    mask: FilterMask of type 4 (other types make the filter inert, as Nav2
+      refuses them; base/multiplier are ignored like Nav2 does).
     poses: float [B, 3].
     state: ZoneState [B].
     table: ZoneTable shared by the fleet.
@@ -165,15 +175,24 @@ def zone_filter(mask: FilterMask, poses, state: ZoneState, table: ZoneTable, *, 
   Returns:
     (new ZoneState, ZoneResult [B]).
   """
+  if not isinstance(state, ZoneState):
+    raise TypeError(f"state must be a ZoneState (ZoneState.create); got {type(state).__name__}")
+  if not isinstance(table, ZoneTable):
+    raise TypeError(f"table must be a ZoneTable (ZoneTable.create); got {type(table).__name__}")
+  b = state.current.shape[0]
+  idx, idx_ok, poses, enabled, transform = robot_inputs(mask, poses, b, mask_index, enabled, transform)
+  if state.params.shape[1:] != table.nominal.shape:
+    raise ValueError(f"ZoneState has {state.params.shape[1:]} parameters but the table has "
+                     f"{table.nominal.shape}; build the state with ZoneState.create(table, B)")
+  return _zone_jit(mask, poses, state, table, idx, idx_ok, enabled, transform)
+
+
+@jax.jit
+def _zone_jit(mask, poses, state, table, idx, idx_ok, enabled, transform):
   with jax.named_scope("zone_filter"):
-    b = state.current.shape[0]
-    idx, poses, enabled, transform = robot_inputs(mask, poses, b, mask_index, enabled, transform)
-    if state.params.shape[1:] != table.nominal.shape:
-      raise ValueError(f"ZoneState has {state.params.shape[1:]} parameters but the table has "
-                       f"{table.nominal.shape}; build the state with ZoneState.create(table, B)")
+    def one(st, i, ok, pose, en, tf):
+      new, out = zone_filter_one(st, table, *_mask_leaves(mask, i), pose, en & ok, tf)
+      return new, ZoneResult(out.zone, out.params, out.event, out.error | ~ok)
 
-    def one(st, i, pose, en, tf):
-      return zone_filter_one(st, table, *_mask_leaves(mask, i), pose, en, tf)
-
-    return jax.vmap(one, in_axes=(0, 0, 0, 0, None if transform is None else 0))(
-        state, idx, poses, enabled, transform)
+    return jax.vmap(one, in_axes=(0, 0, 0, 0, 0, None if transform is None else 0))(
+        state, idx, idx_ok, poses, enabled, transform)
