@@ -94,15 +94,19 @@ def main(argv=None) -> int:
   argv = list(sys.argv[1:] if argv is None else argv)
   _xla_flags.use_fast_cpu_compile()   # before any JAX backend starts
   parser = build_parser()
-  args, extra = parser.parse_known_args(argv)
-  if extra:
-    if not getattr(args, "passthrough", None):
-      parser.error(f"unrecognized arguments: {' '.join(extra)}")
-    setattr(args, args.passthrough, list(getattr(args, args.passthrough, None) or []) + extra)
+  try:
+    args, extra = parser.parse_known_args(argv)
+    if extra:
+      if not getattr(args, "passthrough", None):
+        parser.error(f"unrecognized arguments: {' '.join(extra)}")
+      setattr(args, args.passthrough, list(getattr(args, args.passthrough, None) or []) + extra)
+  except SystemExit as e:          # --help, --version (0) and argparse usage errors (2)
+    return int(e.code or 0) if not isinstance(e.code, str) else EXIT_USAGE
   try:
     return int(args.func(args) or 0)
   except CliError as e:
-    print(f"jaxfilters {args.command}: error: {e}", file=sys.stderr)
+    text = "; ".join(line.strip() for line in str(e).splitlines() if line.strip())
+    print(f"jaxfilters {args.command}: error: {text[:500]}", file=sys.stderr)
     return EXIT_USAGE
   except KeyboardInterrupt:
     print(f"jaxfilters {args.command}: interrupted", file=sys.stderr)
@@ -117,4 +121,7 @@ def main(argv=None) -> int:
 
 
 if __name__ == "__main__":
-  sys.exit(main())
+  # Run the imported module's main, not this __main__ copy: commands raise
+  # jaxfilters.cli.CliError, which must be the class main() catches.
+  from jaxfilters.cli import main as _main
+  sys.exit(_main())

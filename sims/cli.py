@@ -20,6 +20,7 @@ from __future__ import annotations
 
 import argparse
 import json
+import math
 import os
 import sys
 import time
@@ -83,6 +84,45 @@ def register_fleet(sub) -> argparse.ArgumentParser:
   return p
 
 
+def _check_fleet_args(args) -> None:
+  """Every option value checked before anything is loaded or simulated (one-line errors)."""
+  def finite_positive(name, v):
+    if v is not None and not (math.isfinite(v) and v > 0):
+      raise CliError(f"{name} must be a finite number > 0; got {v!r}")
+  if args.robots < 1:
+    raise CliError(f"--robots must be >= 1; got {args.robots}")
+  if args.robots_per_world is not None and args.robots_per_world < 1:
+    raise CliError(f"--robots-per-world must be >= 1; got {args.robots_per_world}")
+  finite_positive("--seconds", args.seconds)
+  finite_positive("--chunk-seconds", args.chunk_seconds)
+  if args.steps is not None and args.steps < 1:
+    raise CliError(f"--steps must be >= 1; got {args.steps}")
+  if not 0 <= args.seed < 2 ** 32:
+    raise CliError(f"--seed must lie in [0, 2**32); got {args.seed}")
+  if args.record_robots < 0:
+    raise CliError(f"--record-robots must be >= 0; got {args.record_robots}")
+  for name in ("speed_base", "speed_multiplier"):
+    v = getattr(args, name)
+    if not math.isfinite(v):
+      raise CliError(f"--{name.replace('_', '-')} must be finite; got {v!r}")
+  for name in ("map", "keepout", "speed"):
+    p = getattr(args, name)
+    if p is not None and not Path(p).is_file():
+      raise CliError(f"--{name} {p}: no such file" if not Path(p).exists() else f"--{name} {p}: not a file")
+
+
+def _prepare_out(out: Path) -> Path:
+  """Creates the output folder and proves it writable *before* the simulation runs."""
+  try:
+    out.mkdir(parents=True, exist_ok=True)
+    probe = out / ".jaxfilters_write_test"
+    probe.write_text("ok")
+    probe.unlink()
+  except OSError as e:
+    raise CliError(f"--out {out}: cannot write there ({e.strerror or e})") from None
+  return out
+
+
 def _enable_cache() -> None:
   import jax
   root = Path(os.environ.get("XDG_CACHE_HOME", Path.home() / ".cache")) / "jaxfilters" / "xla"
@@ -125,8 +165,7 @@ def run_fleet(args) -> int:
   from sims.render import render_gif, render_png
   from sims.scenario import Scenario
 
-  if args.robots < 1:
-    raise CliError("--robots must be >= 1")
+  _check_fleet_args(args)
   k = args.robots_per_world or (args.robots if args.robots <= 64 else
                                 max(d for d in range(1, 17) if args.robots % d == 0))
   if args.robots % k:
@@ -134,18 +173,25 @@ def run_fleet(args) -> int:
   maps = (args.map, args.keepout, args.speed)
   if any(m is not None for m in maps) and not all(m is not None for m in maps):
     raise CliError("give all three of --map, --keepout and --speed (or none for the built-in warehouse)")
-  if args.map is None:
-    scenario = Scenario.default()
-  else:
-    scenario = Scenario.load(args.map, args.keepout, args.speed, speed_type=args.speed_type,
-                             speed_base=args.speed_base, speed_multiplier=args.speed_multiplier)
+  out = _prepare_out(Path(args.out))
+  try:
+    if args.map is None:
+      scenario = Scenario.default()
+    else:
+      scenario = Scenario.load(args.map, args.keepout, args.speed, speed_type=args.speed_type,
+                               speed_base=args.speed_base, speed_multiplier=args.speed_multiplier)
+  except (FileNotFoundError, ValueError) as e:
+    raise CliError(str(e)) from None
   config = FleetConfig(robots_per_world=k, impl=args.impl)
   num_worlds = args.robots // k
   step_s = config.step_seconds
   if args.steps is not None:
-    total_steps = max(1, args.steps)
+    total_steps = args.steps
   else:
-    total_steps = max(1, int(round((120.0 if args.seconds is None else args.seconds) / step_s)))
+    seconds = 120.0 if args.seconds is None else args.seconds
+    total_steps = int(round(seconds / step_s))
+    if total_steps < 1:
+      raise CliError(f"--seconds must be at least one env step ({step_s:g} s); got {seconds!r}")
   chunk = max(1, min(total_steps, int(round(args.chunk_seconds / step_s))))
   num_chunks = -(-total_steps // chunk)
   total_steps = num_chunks * chunk
@@ -153,7 +199,10 @@ def run_fleet(args) -> int:
   print(f"jaxfilters fleet: {scenario.name}, {args.robots} robots ({num_worlds} world(s) x {k}), "
         f"{total_steps * step_s:g} s simulated, device {jax.devices()[0].device_kind}", file=sys.stderr)
   t0 = time.perf_counter()
-  env = FleetEnv.create(scenario, config, seed=args.seed)
+  try:
+    env = FleetEnv.create(scenario, config, seed=args.seed)
+  except ValueError as e:      # the maps cannot host this fleet (mask resolution, free space)
+    raise CliError(f"{scenario.name}: {e}") from None
   states = env.reset_fn()(env.params, env.world_keys(jax.random.PRNGKey(args.seed), num_worlds))
   run = env.rollout_fn(chunk)
   t1 = time.perf_counter()
@@ -197,8 +246,6 @@ def run_fleet(args) -> int:
                        "robot_steps_per_s": args.robots * total_steps * config.ticks_per_step
                        * config.substeps_per_tick / run_s,
                        "device": str(jax.devices()[0].device_kind)}
-  out = Path(args.out)
-  out.mkdir(parents=True, exist_ok=True)
   (out / "summary.json").write_text(json.dumps(summary, indent=2))
   pose = np.concatenate(poses)
   speed = np.concatenate(speeds)

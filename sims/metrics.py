@@ -75,14 +75,17 @@ class Metrics:
 def zone_at(speed_mask: FilterMask, zone_table: jax.Array, xy: jax.Array) -> jax.Array:
   """Speed zone id (int32) at one point: the robot centre's mask cell; 0 off the mask."""
   _, h, w = speed_mask.data.shape
-  mx, my, valid = geometry.world_to_cell(xy[0], xy[1], speed_mask.origin[0], speed_mask.resolution[0], w, h)
+  mx, my, valid = geometry.world_to_cell(xy[0], xy[1], speed_mask.origin[0], speed_mask.resolution[0], w, h,
+                                         None if speed_mask.origin_lo is None else speed_mask.origin_lo[0])
   byte = jax.lax.bitcast_convert_type(speed_mask.data[0, my, mx], jnp.uint8).astype(jnp.int32)
   return jnp.where(valid, zone_table[byte], 0)
 
 
 def in_keepout(keepout_mask: FilterMask, xy: jax.Array) -> jax.Array:
   """bool: the point's keepout-mask cell is lethal (Nav2's "pose in keepout", spec §4.2)."""
-  return pose_in_lethal_zone_one(keepout_mask.data[0], keepout_mask.origin[0], keepout_mask.resolution[0], xy)
+  lo = None if keepout_mask.origin_lo is None else keepout_mask.origin_lo[0]
+  return pose_in_lethal_zone_one(keepout_mask.data[0], keepout_mask.origin[0], keepout_mask.resolution[0], xy,
+                                 lo)
 
 
 def physics_update(m: Metrics, prev_in_keepout: jax.Array, xy: jax.Array, step_len: jax.Array,

@@ -9,7 +9,7 @@
 2. a coarser navigation grid (`navigation.pool_costmap`) keeps every
    keepout, obstacle, inscribed and unknown cell blocked;
 3. goal stations (far from obstacles, in the largest connected free region,
-   spread by farthest-point sampling) and spawn points (a 1 m lattice);
+   spread by farthest-point sampling) and spawn points (free cells, >= 0.8 m apart);
 4. the navigation field of every station (`navigation.distance_field`);
 5. a speed-zone table: zone 0 is "no limit" (mask value 0, off-mask or
    unknown), zones 1..Z-1 are the distinct limits of the speed mask.
@@ -37,7 +37,8 @@ from sims.config import FleetConfig
 from sims.scenario import Scenario, speed_limit_host
 
 STATIC_LAYER = StaticLayerConfig(track_unknown_space=True)
-SPAWN_SPACING = 1.0  # m, lattice of spawn points (robots start at least ~0.9 m apart)
+SPAWN_SPACING = 0.8  # m, robots start at least this far apart (2 * 0.22 m radius + margin)
+MAX_SPAWNS = 4096    # spawn points kept per map (robots sample without replacement)
 
 
 @_dataclass
@@ -225,17 +226,24 @@ def build_world(scenario: Scenario, config: FleetConfig, *, seed: int = 0) -> Wo
   stations = centres[pick].astype(np.float32)
   dist = navigation.distance_field(jnp.asarray(weight_m), jnp.asarray(cr[pick], jnp.int32),
                                    jnp.asarray(cc[pick], jnp.int32))
-  # Spawn lattice: the clear reachable cell containing each lattice point.
-  lattice = np.zeros_like(clear)
-  lattice[cr, cc] = True
-  step = max(1, int(round(SPAWN_SPACING / nav_res)))
-  keep = np.zeros_like(clear)
-  keep[step // 2::step, step // 2::step] = True
-  sr, sc = np.nonzero(lattice & keep)
-  spawns = np.stack([ox + (sc + 0.5) * nav_res, oy + (sr + 0.5) * nav_res], axis=1).astype(np.float32)
+  # Spawn points: reachable navigation cells that are not blocked (a robot there is clear of
+  # obstacles and keepout by at least its inscribed radius), picked greedily lowest cost first
+  # (random order among equal costs) at least SPAWN_SPACING apart. Small maps such as Nav2's
+  # tb3_sandbox have free space but little of it clear of the whole inflation radius.
+  free_r, free_c = np.nonzero(~blocked & np.isfinite(reach[best]))
+  order = np.lexsort((rng.random(len(free_r)), weight[free_r, free_c]))
+  pts = np.stack([ox + (free_c + 0.5) * nav_res, oy + (free_r + 0.5) * nav_res], axis=1)[order]
+  chosen = np.empty((0, 2))
+  for p in pts:
+    if len(chosen) == 0 or np.min(np.sum((chosen - p) ** 2, axis=1)) >= SPAWN_SPACING ** 2:
+      chosen = np.concatenate([chosen, p[None]])
+      if len(chosen) >= MAX_SPAWNS:
+        break
+  spawns = chosen.astype(np.float32)
   if len(spawns) < config.robots_per_world:
-    raise ValueError(f"the map has {len(spawns)} spawn points ({SPAWN_SPACING} m lattice); need "
-                     f"robots_per_world = {config.robots_per_world} or fewer robots per world")
+    raise ValueError(f"the map has room for {len(spawns)} robots per world (free cells clear of "
+                     f"obstacles and keepout, {SPAWN_SPACING} m apart); need robots_per_world = "
+                     f"{config.robots_per_world}: use fewer robots per world")
 
   n = int(round(config.local_costmap_size / res))
   pad = n

@@ -44,7 +44,7 @@ def test_robot_in_zone_test_only_costs_253_254(value, lethal):
   bounds = np.array([[0.0, 0.0, 4.0, 4.0]], np.float32)
   state, _ = jf.keepout_update_bounds(cm, mask, pose, jf.KeepoutState.create(1), bounds, config=cfg)
   assert bool(state.is_pose_lethal[0]) is lethal
-  assert bool(metrics.in_keepout(mask, jnp.asarray(pose[:, :2]))[0]) is lethal
+  assert bool(metrics.in_keepout(mask, jnp.asarray(pose[0, :2]))) is lethal
 
 
 def test_unknown_cell_does_not_override_real_zones():
