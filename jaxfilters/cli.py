@@ -128,9 +128,10 @@ examples:
       --set KEEPOUT_ZONE_ENABLED=True --set SPEED_ZONE_ENABLED=True --poses poses.csv
   jaxfilters query --speed warehouse_speed.yaml --speed-base 100 --speed-multiplier -1 --poses poses.csv
 
-Each pose is a fresh robot's first filter cycle (Nav2 semantics, spec §5: an unknown cell, a cell off
-the mask and a limit of 0 all give speed_limit null = no limit). A filter that is absent or disabled
-gives null. Poses are rounded to float32 like every pose in jaxfilters.
+Each pose is a fresh robot's first filter cycle, as Nav2's filters run it: an unknown cell, a cell off
+the mask and a computed limit of 0 all give speed_limit null (no limit). A filter that is absent or
+disabled gives null. Poses are rounded to float32 like every pose in jaxfilters. Write a value that
+starts with '-' as --transform=-1,2,0.
 exit codes: 0 ok, 2 bad option or input file, 1 internal error"""
 
 
@@ -138,9 +139,9 @@ def register_query(sub) -> None:
   """Adds `jaxfilters query`: what the costmap filters say at given poses, as JSON lines."""
   p = sub.add_parser(
       "query", help="speed limit, keepout cost, binary state and zone at poses (JSON lines)",
-      description="Prints one JSON object per pose, in order: x, y, speed_limit (number or null for "
-      "no limit), speed_limit_type (percent/absolute), keepout_cost (0..255 cost of the keepout mask "
-      "under the pose; 255 off the mask or on an unknown cell), binary_state, zone.",
+      description="Prints one JSON object per pose, in order, with keys x, y, speed_limit (a number, or\n"
+      "null for no limit), speed_limit_type (percent / absolute), keepout_cost (0..255, the cost of the\n"
+      "keepout mask under the pose; 255 off the mask or on an unknown cell), binary_state and zone.",
       epilog=_QUERY_EPILOG, formatter_class=argparse.RawDescriptionHelpFormatter)
   p.add_argument("--poses", required=True, metavar="F.csv",
                  help="rows x,y or x,y,yaw in the costmap's global frame (m, rad); a header line is allowed")
@@ -222,7 +223,7 @@ def _query_poses(path: str):
       continue  # header
     if len(fields) not in (2, 3):
       raise CliError(f"{path} line {line}: expected x,y or x,y,yaw (2 or 3 numbers); "
-                     f"got {len(fields)} fields")
+                     f"got {len(fields)} field{'s' if len(fields) != 1 else ''}")
     if None in numbers:
       bad = fields[numbers.index(None)]
       raise CliError(f"{path} line {line}: {validate.short_repr(bad)} is not a number")

@@ -220,11 +220,13 @@ class Nav2ZoneFilter(Nav2Filter):
   """A ZoneParameterFilter (spec §7); see Nav2Filter for the common fields.
 
   Attributes:
-    table: ZoneTable [Z = 128, P] for `zone_filter`: the configured states and
-      the numeric parameters they set (bools as 1.0 / 0.0).
+    table: ZoneTable [Z = 128, P] for `zone_filter`: the configured states a
+      mask can reach (ids 1..127) and the numeric parameters they set (bools
+      as 1.0 / 0.0).
     parameters: the P table columns as (node, parameter); the table's column
       names are "node:parameter".
-    states: every state Nav2 keeps, with all setpoint values as written.
+    states: every state Nav2 keeps (ids 1..255), with all setpoint values
+      as written.
       Values a float32 table cannot hold (strings, lists, integers beyond
       2**24) are here but not in `table` (a warning names them).
     nominal_defaults: the values Nav2 restores in state 0, as written.
@@ -577,17 +579,18 @@ class _Reader:
         raise ValueError(f"{self.where}: missing required parameter '{key}'")
       return default
     value = self.node.params[key]
+    placeholder = None
     if isinstance(value, str) and value in self._subs:
       self._used.add(value)
-      value = self._subs[value]
+      placeholder, value = value, self._subs[value]
       if isinstance(value, str) and kind != "str":
         try:
           value = yaml.safe_load(value)
         except yaml.YAMLError:
           pass  # stays a string: reported below as not a literal of this kind
-    return self._check(key, value, kind)
+    return self._check(key, value, kind, placeholder)
 
-  def _check(self, key: str, v: Any, kind: str) -> Any:
+  def _check(self, key: str, v: Any, kind: str, placeholder: str | None) -> Any:
     ok = {"bool": isinstance(v, bool),
           "int": isinstance(v, int) and not isinstance(v, bool),
           "float": isinstance(v, (int, float)) and not isinstance(v, bool),
@@ -597,7 +600,9 @@ class _Reader:
     if ok:
       return float(v) if kind == "float" else v
     msg = f"{self.where}: parameter '{key}' must be {_KINDS[kind]}; got {validate.short_repr(v)}"
-    if isinstance(v, str) and kind != "str":
+    if placeholder is not None:
+      msg += f" from substitution {placeholder!r}"
+    elif isinstance(v, str) and kind != "str":
       msg += (f", an unresolved launch placeholder? pass substitutions={{{v!r}: ...}} "
               f"(CLI: --set {v}=VALUE)")
     raise ValueError(msg)
@@ -822,8 +827,7 @@ def _zone_filter(r: _Reader, name: str, fw: str, common: dict, event_topic: str)
       continue
     if sid >= NUM_ZONES:
       _warn(f"{fw}: state '{sname}' has id {sid}; int8 masks only reach 1..{NUM_ZONES - 1}, so the state "
-            "can never apply and is left out of the table")
-      continue
+            "can never apply (it is in .states but not in the table)")
     if sid in ids:
       raise ValueError(f"{fw}: states '{ids[sid]}' and '{sname}' both have id {sid} ('{name}.{sname}.id')")
     ids[sid] = sname
@@ -855,7 +859,8 @@ def _zone_filter(r: _Reader, name: str, fw: str, common: dict, event_topic: str)
     table = ZoneTable.create(
         [f"{n}:{p}" for n, p in columns],
         {col(p): _table_value(p.value) for p in nominal if col(p) in keep},
-        {s.id: {col(p): _table_value(p.value) for p in s.setpoints if col(p) in keep} for s in states})
+        {s.id: {col(p): _table_value(p.value) for p in s.setpoints if col(p) in keep}
+         for s in states if s.id < NUM_ZONES})
   except ValueError as e:
     raise ValueError(f"{fw}: {e}") from None
   return Nav2ZoneFilter(table=table, parameters=tuple(columns), states=tuple(states), nominal_defaults=nominal,

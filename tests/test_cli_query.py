@@ -182,7 +182,7 @@ def test_zone_id_without_a_state_is_an_error(tmp_path, capsys, nav2_maps):
 @pytest.mark.parametrize("text,match", [
     ("x,y\n1,2\n1,b\n", "line 3: 'b' is not a number"),
     ("1,2,3,4\n", "line 1: expected x,y or x,y,yaw (2 or 3 numbers); got 4 fields"),
-    ("1\n", "line 1: expected x,y or x,y,yaw"),
+    ("1\n", "line 1: expected x,y or x,y,yaw (2 or 3 numbers); got 1 field"),
     ("1,2\nx,y\n", "line 2: 'x' is not a number"),
     ("1,nan\n", "line 1: x,y,yaw must be finite"),
     ("1e39,0\n", "line 1: x,y,yaw must fit float32"),

@@ -236,7 +236,7 @@ def test_zone_filter_states_in_nav2_shape(tmp_path):
   assert "controller_server:goal_checker" in messages and "cannot hold" in messages
   assert (z.plugin, z.state_event_topic, z.mask_topic) == ("nav2_costmap_2d::ZoneParameterFilter",
                                                            "/zone_filter_state", "/zone_mask")
-  assert [(s.name, s.id) for s in z.states] == [("slow", 1), ("fast", 2), ("lamp_on", 3)]
+  assert [(s.name, s.id) for s in z.states] == [("slow", 1), ("fast", 2), ("lamp_on", 3), ("huge", 200)]
   assert z.states[0].setpoints[2] == nav2.ZoneSetpoint("mode", "controller_server", "goal_checker", "precise")
   assert [p.value for p in z.nominal_defaults] == [0.5, 0.55, "general"]
   cols = [f"{n}:{p}" for n, p in z.parameters]
@@ -268,6 +268,22 @@ def test_zone_filter_states_in_nav2_shape(tmp_path):
       assert int(out.zone[i]) == refs[i].current
       want = [refs[i].params.get(k, 0.0) for k in ("vel", "infl", "lamp")]
       np.testing.assert_allclose(np.asarray(out.params[i]), want, rtol=1e-6)
+
+
+def test_zone_state_without_id_names_the_key(tmp_path):
+  path = _zone_params(tmp_path)
+  doc = yaml.safe_load(path.read_text())
+  del doc["global_costmap"]["global_costmap"]["ros__parameters"]["zone_filter"]["lamp_on"]["id"]
+  path.write_text(yaml.safe_dump(doc))
+  with pytest.raises(ValueError, match=r"node '/global_costmap/global_costmap': missing required parameter "
+                     r"'zone_filter.lamp_on.id'"):
+    with warnings.catch_warnings():
+      warnings.simplefilter("ignore", nav2.Nav2ParamsWarning)
+      nav2.load_params(path)
+  p = nav2.load_params(_keepout_file(tmp_path))
+  assert p.local_costmap is None and p.costmap("global_costmap") is p.global_costmap
+  with pytest.raises(ValueError, match="has no local_costmap node"):
+    p.costmap("local_costmap")
 
 
 def test_zone_readout_flags_unconfigured_ids(tmp_path):
@@ -401,6 +417,9 @@ def test_keepout_options_placeholders_and_warnings(tmp_path):
     nav2.load_params(path)
   with pytest.raises(ValueError, match=r"node '/keepout_info_server': parameter 'base' must be a number.*'KEEP_BASE'"):
     nav2.load_params(path, substitutions={"KEEP_ON": "yes"})
+  with pytest.raises(ValueError, match=r"'keepout_filter.enabled' must be a bool .*; got 'maybe' from "
+                     r"substitution 'KEEP_ON'$"):
+    nav2.load_params(path, substitutions={"KEEP_ON": "maybe", "KEEP_BASE": "2.5"})
   with pytest.warns(nav2.Nav2ParamsWarning) as record:
     k = nav2.load_params(path, substitutions={"KEEP_ON": "false", "KEEP_BASE": "2.5"}).global_costmap.keepout
   messages = " ".join(str(w.message) for w in record)
