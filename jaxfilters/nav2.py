@@ -9,7 +9,10 @@
     state, out = speed_filter(g.speed.mask, poses, SpeedState.create(B), enabled=g.speed.enabled)
     costmap, ks = keepout_filter(costmap, g.keepout.mask, poses, ks,
                                  enabled=g.keepout.enabled, config=g.keepout.config)
+    # A costmap with a ZoneParameterFilter (g.zone is None without one):
     zs, zr = zone_filter(g.zone.mask, poses, ZoneState.create(g.zone.table, B), g.zone.table)
+    # Every enabled filter's first cycle at B poses, one jitted call:
+    out = g.readout(poses)
 
 The file is read the way Nav2 wires its filters (spec §3, §4-§8):
 
