@@ -15,6 +15,9 @@ from jaxfilters.keepout import (KeepoutConfig, KeepoutState, keepout_filter, kee
                                 occ_to_cost)
 from jaxfilters.map_io import load_map, load_map_image, save_map
 from jaxfilters.pipeline import LayersConfig, costmap_pipeline
+from jaxfilters.nav2 import (Nav2BinaryFilter, Nav2Costmap, Nav2Filter, Nav2KeepoutFilter, Nav2Params,
+                             Nav2ParamsWarning, Nav2Readout, Nav2SpeedFilter, Nav2ZoneFilter, ZoneSetpoint,
+                             ZoneStateConfig, load_params)
 from jaxfilters.speed import (LookaheadConfig, SpeedResult, SpeedState, speed_filter,
                               speed_filter_lookahead)
 from jaxfilters.static_layer import StaticLayerConfig, static_layer
@@ -23,10 +26,13 @@ from jaxfilters.zone import ZoneResult, ZoneState, ZoneTable, zone_filter
 
 __all__ = [
     "__version__", "BinaryResult", "BinaryState", "Costmap", "FilterInfo", "FilterMask", "InflationConfig",
-    "KeepoutConfig", "KeepoutState", "LayersConfig", "LookaheadConfig", "OccupancyGrid",
-    "SpeedResult", "SpeedState", "StaticLayerConfig", "ZoneResult", "ZoneState", "ZoneTable",
+    "KeepoutConfig", "KeepoutState", "LayersConfig", "LookaheadConfig", "Nav2BinaryFilter", "Nav2Costmap",
+    "Nav2Filter", "Nav2KeepoutFilter", "Nav2Params", "Nav2ParamsWarning", "Nav2Readout", "Nav2SpeedFilter",
+    "Nav2ZoneFilter", "OccupancyGrid",
+    "SpeedResult", "SpeedState", "StaticLayerConfig", "ZoneResult", "ZoneSetpoint", "ZoneState",
+    "ZoneStateConfig", "ZoneTable",
     "binary_filter", "constants", "costmap_pipeline", "footprint_radii", "inflate",
-    "keepout_filter", "keepout_update_bounds", "load_map", "load_map_image", "occ_to_cost",
+    "keepout_filter", "keepout_update_bounds", "load_map", "load_map_image", "load_params", "occ_to_cost",
     "save_map", "speed_filter", "speed_filter_lookahead", "static_layer", "world_to_cell",
     "zone_filter",
 ]

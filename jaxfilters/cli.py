@@ -39,7 +39,9 @@ EXIT_USAGE = 2
 EXIT_VIOLATION = 3
 
 # name -> "module:function" of the library's own commands (registered in this order).
-_BUILTIN: dict[str, str] = {}
+_BUILTIN: dict[str, str] = {
+    "query": "jaxfilters.cli:register_query",
+}
 
 
 class CliError(Exception):
@@ -120,8 +122,272 @@ def main(argv=None) -> int:
     return EXIT_INTERNAL
 
 
+# --------------------------------------------------------------------------- query
+
+_QUERY_EPILOG = """\
+examples:
+  jaxfilters query --params nav2_params.yaml \\
+      --mask keepout_filter_mask_server=warehouse_keepout.yaml \\
+      --mask speed_filter_mask_server=warehouse_speed.yaml \\
+      --set KEEPOUT_ZONE_ENABLED=True --set SPEED_ZONE_ENABLED=True --poses poses.csv
+  jaxfilters query --speed warehouse_speed.yaml --speed-base 100 --speed-multiplier -1 --poses poses.csv
+
+Each pose is a fresh robot's first filter cycle, as Nav2's filters run it: an unknown cell, a cell off
+the mask and a computed limit of 0 all give speed_limit null (no limit). A filter that is absent or
+disabled gives null. Poses are rounded to float32 like every pose in jaxfilters. Write a value that
+starts with '-' as --transform=-1,2,0.
+exit codes: 0 ok, 2 bad option or input file, 1 internal error"""
+
+
+def register_query(sub) -> None:
+  """Adds `jaxfilters query`: what the costmap filters say at given poses, as JSON lines."""
+  p = sub.add_parser(
+      "query", help="speed limit, keepout cost, binary state and zone at poses (JSON lines)",
+      description="Prints one JSON object per pose, in order, with keys x, y, speed_limit (a number, or\n"
+      "null for no limit), speed_limit_type (percent / absolute), keepout_cost (0..255, the cost of the\n"
+      "keepout mask under the pose; 255 off the mask or on an unknown cell), binary_state and zone.",
+      epilog=_QUERY_EPILOG, formatter_class=argparse.RawDescriptionHelpFormatter)
+  p.add_argument("--poses", required=True, metavar="F.csv",
+                 help="rows x,y or x,y,yaw in the costmap's global frame (m, rad); a header line is allowed")
+  g = p.add_argument_group("filters from a Nav2 params file")
+  g.add_argument("--params", metavar="P.yaml", help="a nav2_params.yaml")
+  g.add_argument("--costmap", choices=("global_costmap", "local_costmap"),
+                 help="which costmap's filters (default global_costmap)")
+  g.add_argument("--mask", action="append", default=[], metavar="NODE=MAP.yaml",
+                 help="the map YAML a filter mask server serves (its yaml_filename); repeatable")
+  g.add_argument("--set", action="append", default=[], dest="substitutions", metavar="PLACEHOLDER=VALUE",
+                 help="resolve a launch placeholder such as KEEPOUT_ZONE_ENABLED=True; repeatable")
+  g.add_argument("--transform", metavar="X,Y,YAW",
+                 help="pose of the costmap's global_frame in the masks' frame (Nav2 takes it from TF), "
+                 "needed when they differ, e.g. local_costmap in odom with masks in map")
+  m = p.add_argument_group("filters from mask files (instead of --params), with Nav2's default parameters")
+  m.add_argument("--keepout", metavar="M.yaml", help="keepout mask (type 0)")
+  m.add_argument("--speed", metavar="M.yaml", help="speed mask")
+  m.add_argument("--speed-type", metavar="1|2", help="1 percent (default), 2 m/s")
+  m.add_argument("--speed-base", metavar="B", help="limit = value * multiplier + base (default 0.0)")
+  m.add_argument("--speed-multiplier", metavar="K", help="(default 1.0)")
+  m.add_argument("--binary", metavar="M.yaml", help="binary mask (type 3, flip_threshold 50, default_state false)")
+  m.add_argument("--zone", metavar="M.yaml", help="zone mask (type 4; every id 1..127 is a zone)")
+  p.set_defaults(func=run_query)
+
+
+def _query_number(option: str, text: str) -> float:
+  from jaxfilters import validate
+  try:
+    value = float(text)
+  except ValueError:
+    raise CliError(f"{option} must be a number; got {text!r}") from None
+  try:
+    validate.float32_values(value, option)
+  except ValueError as e:
+    raise CliError(str(e)) from None
+  return value
+
+
+def _query_pairs(option: str, items: list[str]) -> dict[str, str]:
+  out = {}
+  for item in items:
+    key, sep, value = item.partition("=")
+    if not sep or not key.strip() or not value.strip():
+      raise CliError(f"{option} must be NAME=VALUE with both parts non-empty; got {item!r}")
+    if key.strip() in out:
+      raise CliError(f"{option} gives {key.strip()!r} twice")
+    out[key.strip()] = value.strip()
+  return out
+
+
+def _query_poses(path: str):
+  """Reads F.csv -> (poses float32 [B, 3], line numbers, echoed (x, y))."""
+  import csv
+
+  import numpy as np
+
+  from jaxfilters import validate
+  try:
+    with open(path, newline="", encoding="utf-8") as f:
+      text = f.read()
+  except FileNotFoundError:
+    raise CliError(f"--poses {path}: file does not exist") from None
+  except (OSError, UnicodeDecodeError) as e:
+    raise CliError(f"--poses {path}: cannot read it ({type(e).__name__}: {e})") from None
+  poses, lines, echo = [], [], []
+  reader = csv.reader(text.splitlines())
+  for fields in reader:
+    line = reader.line_num
+    fields = [v.strip() for v in fields]
+    if not any(fields):
+      continue
+    numbers = []
+    for v in fields:
+      try:
+        numbers.append(float(v))
+      except ValueError:
+        numbers.append(None)
+    if line == 1 and all(n is None for n in numbers):
+      continue  # header
+    if len(fields) not in (2, 3):
+      raise CliError(f"{path} line {line}: expected x,y or x,y,yaw (2 or 3 numbers); "
+                     f"got {len(fields)} field{'s' if len(fields) != 1 else ''}")
+    if None in numbers:
+      bad = fields[numbers.index(None)]
+      raise CliError(f"{path} line {line}: {validate.short_repr(bad)} is not a number")
+    try:
+      validate.float32_values(numbers, "x,y,yaw", owner=f"{path} line {line}")
+    except ValueError as e:
+      raise CliError(str(e)) from None
+    poses.append(numbers + [0.0] * (3 - len(numbers)))
+    lines.append(line)
+    echo.append((numbers[0], numbers[1]))
+  if not poses:
+    raise CliError(f"--poses {path}: no poses (expected rows x,y or x,y,yaw)")
+  return np.asarray(poses, np.float32), lines, echo
+
+
+def _query_costmap_from_params(args, nav2):
+  import warnings
+  name = args.costmap or "global_costmap"
+  masks = _query_pairs("--mask", args.mask)
+  subs = _query_pairs("--set", args.substitutions)
+  with warnings.catch_warnings(record=True) as caught:
+    warnings.simplefilter("always", nav2.Nav2ParamsWarning)
+    try:
+      params = nav2.load_params(args.params, masks=masks, substitutions=subs, costmaps=(name,))
+    except (ValueError, FileNotFoundError) as e:
+      raise CliError(str(e).splitlines()[0]) from None
+  for w in caught:
+    print(f"jaxfilters query: warning: {str(w.message).splitlines()[0]}", file=sys.stderr)
+  costmap = params.costmap(name)
+  if not costmap.filters:
+    raise CliError(f"--params {args.params}: {name} has no costmap filters (its 'filters:' list is empty)")
+  for f in costmap.filters:
+    if not f.enabled:
+      print(f"jaxfilters query: warning: {name} filter '{f.name}' is disabled (enabled: false); "
+            "its columns are null", file=sys.stderr)
+  return costmap
+
+
+def _query_costmap_from_masks(args, nav2):
+  from jaxfilters import validate
+  from jaxfilters.map_io import load_map
+  from jaxfilters.types import FilterInfo, FilterMask
+
+  def mask(option, path, info):
+    try:
+      grid = load_map(path)
+      validate.resolution_value(grid.resolution, owner=f"{option} {path}")
+      validate.float32_values(grid.origin[:2], "origin", owner=f"{option} {path}")
+    except (ValueError, FileNotFoundError) as e:
+      raise CliError(f"{option}: {str(e).splitlines()[0]}") from None
+    return FilterMask.create(grid, info)
+
+  masks = {}
+  if args.keepout:
+    masks["keepout"] = mask("--keepout", args.keepout, FilterInfo.create(0))
+  if args.speed:
+    ftype = 1 if args.speed_type is None else args.speed_type.strip()
+    if ftype not in (1, "1", "2"):
+      raise CliError(f"--speed-type must be 1 (percent) or 2 (m/s); got {args.speed_type!r}")
+    base = 0.0 if args.speed_base is None else _query_number("--speed-base", args.speed_base)
+    mult = 1.0 if args.speed_multiplier is None else _query_number("--speed-multiplier", args.speed_multiplier)
+    masks["speed"] = mask("--speed", args.speed, FilterInfo.create(int(ftype), base, mult))
+  if args.binary:
+    masks["binary"] = mask("--binary", args.binary, FilterInfo.create(3))
+  if args.zone:
+    masks["zone"] = mask("--zone", args.zone, FilterInfo.create(4))
+  return nav2.Nav2Costmap.from_masks(**masks)
+
+
+def _query_zone_id(f, x: float, y: float) -> int:
+  """The zone mask value under (x, y), for an error message (host float64 of the float32 values)."""
+  import math
+
+  import numpy as np
+  data = np.asarray(f.mask.data[0])
+  ox, oy = (float(v) for v in np.asarray(f.mask.origin[0]))
+  res = float(np.asarray(f.mask.resolution[0]))
+  mx, my = math.floor((float(np.float32(x)) - ox) / res), math.floor((float(np.float32(y)) - oy) / res)
+  return int(data[min(max(my, 0), data.shape[0] - 1), min(max(mx, 0), data.shape[1] - 1)])
+
+
+def run_query(args) -> int:
+  """`jaxfilters query`: validates the options, evaluates every pose in one jitted call, prints JSON lines."""
+  import json
+
+  import numpy as np
+
+  direct = [o for o in ("keepout", "speed", "binary", "zone") if getattr(args, o)]
+  speed_opts = [o for o, v in (("--speed-type", args.speed_type), ("--speed-base", args.speed_base),
+                               ("--speed-multiplier", args.speed_multiplier)) if v is not None]
+  if args.params is not None and direct:
+    raise CliError(f"--{direct[0]} cannot be combined with --params (the params file names the masks; "
+                   "give a mask server's file with --mask NODE=MAP.yaml)")
+  if args.params is None:
+    if not direct:
+      raise CliError("give --params P.yaml, or mask files with --keepout/--speed/--binary/--zone")
+    for option, value in (("--costmap", args.costmap), ("--mask", args.mask), ("--set", args.substitutions),
+                          ("--transform", args.transform)):
+      if value:
+        raise CliError(f"{option} needs --params")
+  if speed_opts and not args.speed:
+    raise CliError(f"{speed_opts[0]} needs --speed M.yaml")
+  transform = None
+  if args.transform is not None:
+    parts = args.transform.split(",")
+    if len(parts) != 3:
+      raise CliError(f"--transform must be X,Y,YAW (3 numbers); got {args.transform!r}")
+    transform = [_query_number("--transform", v) for v in parts]
+  poses, lines, echo = _query_poses(args.poses)
+
+  from jaxfilters import nav2
+  costmap = (_query_costmap_from_params(args, nav2) if args.params is not None
+             else _query_costmap_from_masks(args, nav2))
+  foreign = costmap.foreign_frames()
+  if foreign and transform is None:
+    raise CliError(f"--costmap {costmap.name}: its global_frame is {costmap.global_frame!r} but masks are in "
+                   f"{foreign[0]!r}; Nav2 takes that transform from TF at run time: give --transform X,Y,YAW "
+                   f"(the pose of {costmap.global_frame!r} in {foreign[0]!r})")
+  if transform is not None and not foreign:
+    raise CliError(f"--transform: every enabled mask of {costmap.name} is in its global_frame "
+                   f"{costmap.global_frame!r}; --transform is only for masks in another frame")
+  try:
+    out = costmap.readout(poses, transform=transform)
+  except ValueError as e:
+    raise CliError(str(e).splitlines()[0]) from None
+
+  speed, zone = costmap.speed, costmap.zone
+  if out.zone is not None:
+    bad = np.nonzero(np.asarray(out.zone.error))[0]
+    if bad.size:
+      i = int(bad[0])
+      configured = [s.id for s in zone.states]
+      raise CliError(f"{args.poses} line {lines[i]}: the zone mask gives zone id "
+                     f"{_query_zone_id(zone, *echo[i])} there, which '{zone.name}' does not configure "
+                     f"(configured ids: {configured or 'none'}); Nav2 throws on it "
+                     f"({bad.size} pose(s) affected)")
+  cols = {}
+  if out.speed is not None and speed.percentage is not None:
+    limit = np.asarray(out.speed.speed_limit)
+    valid = np.asarray(out.speed.valid) & (limit != 0)
+    cols["speed_limit"] = [float(str(np.float32(v))) if ok else None for v, ok in zip(limit, valid)]
+    cols["speed_limit_type"] = ["percent" if speed.percentage else "absolute"] * len(lines)
+  if out.keepout_cost is not None:
+    cols["keepout_cost"] = [int(v) for v in np.asarray(out.keepout_cost)]
+  if out.binary is not None:
+    cols["binary_state"] = [bool(v) for v in np.asarray(out.binary.binary_state)]
+  if out.zone is not None:
+    cols["zone"] = [int(v) for v in np.asarray(out.zone.zone)]
+  rows = []
+  for i, (x, y) in enumerate(echo):
+    row = {"x": x, "y": y}
+    for key in ("speed_limit", "speed_limit_type", "keepout_cost", "binary_state", "zone"):
+      row[key] = cols[key][i] if key in cols else None
+    rows.append(json.dumps(row))
+  sys.stdout.write("\n".join(rows) + "\n")
+  return EXIT_OK
+
+
 if __name__ == "__main__":
-  # Run the imported module's main, not this __main__ copy: commands raise
-  # jaxfilters.cli.CliError, which must be the class main() catches.
-  from jaxfilters.cli import main as _main
-  sys.exit(_main())
+  # `python -m jaxfilters.cli` runs this file as `__main__`, a second copy of the module whose
+  # CliError is not the jaxfilters.cli.CliError commands raise: run the imported module's main.
+  from jaxfilters import cli as _cli
+  sys.exit(_cli.main())
