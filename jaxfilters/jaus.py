@@ -11,10 +11,10 @@ Two public versions of the message exist and differ on the wire
 Wire rules (note §1): little-endian, no padding, a uint16 message ID first, a
 uint8 vtag before a variant, a uint16 element count before a list, a uint8
 presence vector (bit i = i-th optional field) first in a query. Scaled
-integers (note §2): `int = floor((real - lo) / step + 0.5)` with
-`step = (hi - lo) / (2**bits - 1)` on encode (round half up, never clamped: a
-real value outside [lo, hi] is a ValueError) and `real = int * step + lo` on
-decode. Peers built on the JAUS Tool Set truncate instead of rounding, so
+integers (note §2): `int = floor((real - lo) / step + 1/2)` with
+`step = (hi - lo) / (2**bits - 1)` on encode (round half up, computed exactly
+in rationals from the float64 value; never clamped: a real value outside
+[lo, hi] is a ValueError) and `real = int * step + lo` on decode. Peers built on the JAUS Tool Set truncate instead of rounding, so
 nothing here requires an exact round trip: `report_to_grid` accepts any value
 within [-1/2, +1] LSB of the decoded one.
 
@@ -53,6 +53,7 @@ import dataclasses
 import math
 import struct
 from collections.abc import Callable
+from fractions import Fraction
 from typing import NamedTuple, Union
 
 import numpy as np
@@ -165,9 +166,10 @@ class _Scaled:
     return v
 
   def encode(self, value, owner: str) -> int:
+    """Exact round half up of (value - lo) / step, in rationals (no float tie errors)."""
     v = self.check(value, owner)
-    i = math.floor((v - self.lo) / self.step + 0.5)
-    return min(max(i, 0), self.max_int)   # guards float rounding at the ends only
+    x = (Fraction(v) - Fraction(self.lo)) * self.max_int / (Fraction(self.hi) - Fraction(self.lo))
+    return math.floor(x + Fraction(1, 2))
 
   def decode(self, i: int) -> float:
     return min(max(i * self.step + self.lo, self.lo), self.hi)
@@ -296,8 +298,7 @@ class CostMap2DReport:
     if arr.ndim != 2:
       raise ValueError(f"CostMap2DReport values must be a 2-D [rows, cols] array; got shape "
                        f"{arr.shape}")
-    hi = 7 if variant == "rle" else (254 if variant == "confidence"
-                                     and not prof.unknown_in_confidence_list else 255)
+    hi = 7 if variant == "rle" else 255
     int_values(arr, f"values ({variant})", lo=0, hi=hi, owner="CostMap2DReport")
     arr = np.ascontiguousarray(arr, np.uint8)
     conf = kn = None
