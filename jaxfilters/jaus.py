@@ -124,6 +124,7 @@ class JausProfile:
 
   @property
   def variants(self) -> tuple[str, ...]:
+    """The data variant names this profile allows, in vtag order."""
     return VARIANTS[:self.num_data_variants]
 
 
@@ -269,10 +270,12 @@ class CostMap2DReport:
 
   @property
   def rows(self) -> int:
+    """NumberOfRows (R)."""
     return int(self.values.shape[0])
 
   @property
   def cols(self) -> int:
+    """NumberOfColumns (C)."""
     return int(self.values.shape[1])
 
   @classmethod
@@ -398,7 +401,7 @@ class CostMap2DQuery:
 
 
 def _profile(name) -> JausProfile:
-  if name not in PROFILES:
+  if not isinstance(name, str) or name not in PROFILES:
     raise ValueError(f"profile must be one of {tuple(PROFILES)}; got {short_repr(name)}")
   return PROFILES[name]
 
