@@ -5,7 +5,7 @@ filter is written for one robot (`*_one`) and vmapped once at the public edge;
 public functions take an explicit leading robot axis B.
 """
 
-from jaxfilters import constants
+from jaxfilters import constants, jaus, ros
 from jaxfilters._version import __version__
 from jaxfilters.binary import BinaryResult, BinaryState, binary_filter
 from jaxfilters.geometry import world_to_cell
@@ -32,7 +32,8 @@ __all__ = [
     "SpeedResult", "SpeedState", "StaticLayerConfig", "ZoneResult", "ZoneSetpoint", "ZoneState",
     "ZoneStateConfig", "ZoneTable",
     "binary_filter", "constants", "costmap_pipeline", "footprint_radii", "inflate",
-    "keepout_filter", "keepout_update_bounds", "load_map", "load_map_image", "load_params", "occ_to_cost",
-    "save_map", "speed_filter", "speed_filter_lookahead", "static_layer", "world_to_cell",
+    "jaus", "keepout_filter", "keepout_update_bounds", "load_map", "load_map_image", "load_params",
+    "occ_to_cost", "ros", "save_map", "speed_filter", "speed_filter_lookahead", "static_layer",
+    "world_to_cell",
     "zone_filter",
 ]
