@@ -516,7 +516,5 @@ def _run_jaus_decode(args) -> int:
 if __name__ == "__main__":
   # `python -m jaxfilters.cli` runs this file as `__main__`, a second copy of the module whose
   # CliError is not the jaxfilters.cli.CliError commands raise: run the imported module's main.
-  # Through the imported module, so `python -m jaxfilters.cli` and the console script share one
-  # CliError class with the commands registered as "jaxfilters.cli:...".
   from jaxfilters import cli as _cli
   sys.exit(_cli.main())
