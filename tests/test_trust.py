@@ -237,13 +237,14 @@ def test_coarse_mask_example_uses_the_costmap_double(res, first):
 
 
 def test_mask_origin_double_decides_the_cell():
-  """A pose 1e-9 m left of a float64 mask origin is off the mask (float32 would round it on)."""
-  origin = 0.1                                   # float32(0.1) = 0.10000000149 > 0.1
-  mask = jf.FilterMask.create(_grid(np.full((4, 4), 30), 0.05, (origin, 0.0)),
-                              jf.FilterInfo.create(1, 100.0, -1.0))
-  x = np.float32(0.1)                            # 0.10000000149: right of the double origin
-  _, on = jf.speed_filter(mask, np.array([[x, 0.01, 0.0]], np.float32), jf.SpeedState.create(1))
-  assert bool(on.valid[0]) and float(on.speed_limit[0]) == 70.0
-  x_left = np.nextafter(np.float32(0.1), np.float32(0))  # 0.0999999940 < 0.1
-  _, off = jf.speed_filter(mask, np.array([[x_left, 0.01, 0.0]], np.float32), jf.SpeedState.create(1))
-  assert not bool(off.valid[0])
+  """Nav2's warehouse origin -15.1 is a double: x = -15.0100002289 lies in cell 2 (float64), not 3.
+
+  With the origin rounded to float32 (-15.1000003815) the same pose falls in cell 3.
+  """
+  data = np.zeros((1, 6), np.int8)
+  data[0, 2], data[0, 3] = 20, 60
+  mask = jf.FilterMask.create(_grid(data, np.float32(0.03), (-15.1, -1.0)), jf.FilterInfo.create(1, 100.0, -1.0))
+  x = np.float32(-15.010000228881836)
+  assert np.floor((float(x) + 15.1) / float(np.float32(0.03))) == 2               # Nav2, in double
+  _, out = jf.speed_filter(mask, np.array([[x, -0.99, 0.0]], np.float32), jf.SpeedState.create(1))
+  assert bool(out.valid[0]) and float(out.speed_limit[0]) == 80.0                   # cell 2: 100 - 20
