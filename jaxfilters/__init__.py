@@ -13,7 +13,8 @@ from jaxfilters.grid import OccupancyGrid
 from jaxfilters.inflation import InflationConfig, footprint_radii, inflate
 from jaxfilters.keepout import (KeepoutConfig, KeepoutState, keepout_filter, keepout_update_bounds,
                                 occ_to_cost)
-from jaxfilters.map_io import load_map, load_map_image, save_map
+from jaxfilters.map_io import (MAX_MAP_CELLS, MapMetadata, load_map, load_map_image,
+                               load_map_with_metadata, save_map)
 from jaxfilters.pipeline import LayersConfig, costmap_pipeline
 from jaxfilters.speed import (LookaheadConfig, SpeedResult, SpeedState, speed_filter,
                               speed_filter_lookahead)
@@ -23,10 +24,12 @@ from jaxfilters.zone import ZoneResult, ZoneState, ZoneTable, zone_filter
 
 __all__ = [
     "__version__", "BinaryResult", "BinaryState", "Costmap", "FilterInfo", "FilterMask", "InflationConfig",
-    "KeepoutConfig", "KeepoutState", "LayersConfig", "LookaheadConfig", "OccupancyGrid",
+    "KeepoutConfig", "KeepoutState", "LayersConfig", "LookaheadConfig", "MAX_MAP_CELLS",
+    "MapMetadata", "OccupancyGrid",
     "SpeedResult", "SpeedState", "StaticLayerConfig", "ZoneResult", "ZoneState", "ZoneTable",
     "binary_filter", "constants", "costmap_pipeline", "footprint_radii", "inflate",
-    "keepout_filter", "keepout_update_bounds", "load_map", "load_map_image", "occ_to_cost",
+    "keepout_filter", "keepout_update_bounds", "load_map", "load_map_image",
+    "load_map_with_metadata", "occ_to_cost",
     "save_map", "speed_filter", "speed_filter_lookahead", "static_layer", "world_to_cell",
     "zone_filter",
 ]
