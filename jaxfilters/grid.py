@@ -35,6 +35,11 @@ def geometry_values(resolution: Any, origin: Any, owner: str, res_name: str = "r
   """
   if isinstance(resolution, (bool, np.bool_)):
     raise ValueError(f"{owner}: {res_name} must be a number; got {resolution!r}")
+  if isinstance(resolution, (float, np.floating)) and \
+      0 < abs(float(resolution)) < validate.F32_TINY:  # clearer than float32_values' wording
+    raise ValueError(f"{owner}: {res_name} must be > 0 and at least {validate.F32_TINY:.4g} "
+                     f"(smaller values become 0 or subnormal in float32 on the device); got "
+                     f"{short_repr(resolution)}")
   res = validate.resolution_value(resolution, owner=owner, name=res_name)
   if res.shape != ():
     raise ValueError(f"{owner}: {res_name} must be one number; got shape {res.shape}")

@@ -19,7 +19,9 @@ files fail loudly and cheaply instead of decoding into a plausible wrong map:
     clamps samples above maxval, ignores surplus samples and decodes maxval !=
     255 one sample at a time in Python); the raster must have exactly the
     declared size and no sample may exceed maxval. Samples are scaled as
-    Pillow scales them, so results equal Pillow's on every valid file.
+    Pillow scales them, so results equal Pillow's on every valid file. (A
+    plain-text P1-P3 file cut inside its last number cannot be told from a
+    shorter number; binary files have no such gap.)
   - BMP: uncompressed (BI_RGB / BI_BITFIELDS) only; the pixel array must be
     present in full.
   - Other formats (JPEG, GIF, TIFF, ...) are refused: they are lossy or carry
