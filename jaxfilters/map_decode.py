@@ -627,9 +627,9 @@ def _pillow_pixels(data: bytes, kind: str, info: dict) -> tuple[np.ndarray, np.n
         raise ValueError(f"decoded {img.size[0]} x {img.size[1]} pixels; the header declares "
                          f"{info['width']} x {info['height']}")
       return _pixels_of(img, info)
-  except ValueError:
+  except (ValueError, MemoryError):
     raise
-  except (OSError, SyntaxError, EOFError, struct.error, Image.DecompressionBombError) as e:
+  except Exception as e:  # noqa: BLE001 - whatever Pillow's decoder raises on damaged data
     raise ValueError(f"{fmt} file corrupt: {type(e).__name__}: {_cut(e)}") from None
 
 

@@ -79,7 +79,7 @@ _TRINARY_SAVED_OCCUPIED, _TRINARY_SAVED_FREE = 0.65, 0.196
 _TRUE_WORDS = ("y", "yes", "true", "on")
 _FALSE_WORDS = ("n", "no", "false", "off")
 # A number written as a YAML string ("5e-2", '2.5'): what yaml-cpp's stream conversion reads.
-_DECIMAL = re.compile(r"[-+]?(?:\d+\.?\d*|\.\d+)(?:[eE][-+]?\d+)?")
+_DECIMAL = re.compile(r"[-+]?(?:[0-9]+\.?[0-9]*|\.[0-9]+)(?:[eE][-+]?[0-9]+)?")
 
 
 # --------------------------------------------------------------------------- metadata
@@ -315,7 +315,7 @@ def _negate(doc: dict, where: str) -> bool:
     return v != 0
   if isinstance(v, str) and len(v) <= 32:  # yaml-cpp tries int first, then bool
     s = v.strip()
-    if re.fullmatch(r"[-+]?\d+", s):
+    if re.fullmatch(r"[-+]?[0-9]+", s):
       return int(s) != 0
     if s.lower() in _TRUE_WORDS:
       return True

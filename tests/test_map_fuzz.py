@@ -271,7 +271,8 @@ def test_valid_pngs_load_identically(img, interlace, parts, level, depth, alpha,
 
 
 @fast(120)
-@given(img=images, magic=st.sampled_from([b"P2", b"P3", b"P5", b"P6"]), maxval=st.integers(1, 65535),
+@given(img=images, magic=st.sampled_from([b"P2", b"P3", b"P5", b"P6"]),
+       maxval=st.integers(1, 65535),
        comment=st.booleans(), sep=st.sampled_from([b" ", b"\n", b"\t", b"\r\n", b"  \n"]))
 def test_netpbm_decodes_as_pillow_does(img, magic, maxval, comment, sep):
   channels = 3 if magic in (b"P3", b"P6") else 1
@@ -311,7 +312,8 @@ def test_valid_bmps_load_identically(img, mode):
 @given(order=st.permutations(["image", "resolution", "origin", "negate", "occupied_thresh",
                               "free_thresh", "mode"]),
        quote=st.sets(st.sampled_from(["resolution", "free_thresh", "occupied_thresh"])),
-       flow=st.booleans(), comments=st.booleans(), mode=st.sampled_from(["trinary", "Scale", "RAW"]),
+       flow=st.booleans(), comments=st.booleans(),
+       mode=st.sampled_from(["trinary", "Scale", "RAW"]),
        negate=st.sampled_from(["0", "1", "true", "false", "'1'"]))
 def test_yaml_written_any_way_loads_identically(tmp_path_factory, order, quote, flow, comments,
                                                 mode, negate):

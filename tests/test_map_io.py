@@ -684,6 +684,7 @@ def test_grid_create_keeps_float64_values():
     ("origin", "[1e39, 0, 0]"), ("origin", "[0, 1.0e-50, 0]"), ("origin", "[0, 0, 1.0e+39]"),
     ("origin", "[1" + "0" * 400 + ", 0, 0]"), ("free_thresh", "1.0e-40"),
     ("occupied_thresh", "1" + "0" * 400), ("free_thresh", "'1_0'"), ("resolution", "'nan'"),
+    ("resolution", "'\u0660.\u0660\u0665'"), ("negate", "'\u0661'"),  # Arabic-Indic digits
 ])
 def test_load_map_rejects_values_float32_cannot_hold(mapdir, key, value):
   y = _yaml_text(mapdir / "m.yaml", **{key: value})
