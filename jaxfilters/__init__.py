@@ -13,7 +13,8 @@ from jaxfilters.grid import OccupancyGrid
 from jaxfilters.inflation import InflationConfig, footprint_radii, inflate
 from jaxfilters.keepout import (KeepoutConfig, KeepoutState, keepout_filter, keepout_update_bounds,
                                 occ_to_cost)
-from jaxfilters.map_io import load_map, load_map_image, save_map
+from jaxfilters.map_io import (MAX_MAP_CELLS, MapMetadata, load_map, load_map_image,
+                               load_map_with_metadata, save_map)
 from jaxfilters.pipeline import LayersConfig, costmap_pipeline
 from jaxfilters.nav2 import (Nav2BinaryFilter, Nav2Costmap, Nav2Filter, Nav2KeepoutFilter, Nav2Params,
                              Nav2ParamsWarning, Nav2Readout, Nav2SpeedFilter, Nav2ZoneFilter, ZoneSetpoint,
@@ -26,13 +27,15 @@ from jaxfilters.zone import ZoneResult, ZoneState, ZoneTable, zone_filter
 
 __all__ = [
     "__version__", "BinaryResult", "BinaryState", "Costmap", "FilterInfo", "FilterMask", "InflationConfig",
-    "KeepoutConfig", "KeepoutState", "LayersConfig", "LookaheadConfig", "Nav2BinaryFilter", "Nav2Costmap",
+    "KeepoutConfig", "KeepoutState", "LayersConfig", "LookaheadConfig", "MAX_MAP_CELLS",
+    "MapMetadata", "Nav2BinaryFilter", "Nav2Costmap",
     "Nav2Filter", "Nav2KeepoutFilter", "Nav2Params", "Nav2ParamsWarning", "Nav2Readout", "Nav2SpeedFilter",
     "Nav2ZoneFilter", "OccupancyGrid",
     "SpeedResult", "SpeedState", "StaticLayerConfig", "ZoneResult", "ZoneSetpoint", "ZoneState",
     "ZoneStateConfig", "ZoneTable",
     "binary_filter", "constants", "costmap_pipeline", "footprint_radii", "inflate",
-    "jaus", "keepout_filter", "keepout_update_bounds", "load_map", "load_map_image", "load_params",
+    "jaus", "keepout_filter", "keepout_update_bounds", "load_map", "load_map_image",
+    "load_map_with_metadata", "load_params",
     "occ_to_cost", "ros", "save_map", "speed_filter", "speed_filter_lookahead", "static_layer",
     "world_to_cell",
     "zone_filter",

@@ -13,6 +13,7 @@ from hypothesis import given, settings, strategies as st
 from PIL import Image
 
 from jaxfilters.grid import OccupancyGrid
+from jaxfilters.validate import F32_TINY
 from jaxfilters.map_io import MAP_MODES, load_map, load_map_image, save_map
 
 MAPS = Path(__file__).resolve().parents[1].parent / "shared" / "maps" / "nav2"
@@ -84,7 +85,7 @@ def test_worked_table(column):
 
 @settings(max_examples=60, deadline=None)
 @given(mode=st.sampled_from(MAP_MODES), negate=st.booleans(),
-       free=st.floats(0.0, 0.999), span=st.floats(1e-3, 1.0))
+       free=st.one_of(st.just(0.0), st.floats(F32_TINY, 0.999)), span=st.floats(1e-3, 1.0))
 def test_matches_scalar_reference_for_every_gray(mode, negate, free, span):
   occupied = min(1.0, free + span)
   got = _row(mode, occupied, free, negate)
@@ -568,13 +569,14 @@ def test_save_empty_name_uses_timestamp(tmp_path, monkeypatch):
   assert re.fullmatch(r"map_\d+\.yaml", yml.name) and (tmp_path / img).is_file()
 
 
-def test_save_origin_precision(tmp_path):
+def test_save_writes_exact_numbers(tmp_path):
+  # map_saver writes 3 decimals (1.235, -7.890) and a quaternion-normalised yaw; we write
+  # the shortest repr that reads back as the same float64.
   yml, _ = save_map(_grid(origin=(1.23456, -7.89012, 4.0)), tmp_path / "o")
   text = yml.read_text()
-  assert "resolution: 0.050\n" in text
+  assert "resolution: 0.05\n" in text and "origin: [1.23456, -7.89012, 4.0]\n" in text
   back = load_map(yml)
-  assert back.origin[:2] == (1.235, -7.89)
-  assert back.origin[2] == pytest.approx(4.0 - 2 * math.pi)  # yaw through a quaternion
+  assert back.origin == (1.23456, -7.89012, 4.0) and back.resolution == 0.05
 
 
 @pytest.mark.parametrize("free, occupied", [(2.0, 2.0), (-2.0, -2.0), (0.7, 0.2), (0.5, 0.5),
@@ -589,7 +591,7 @@ def test_save_zero_thresholds_use_defaults(tmp_path):
   yml, _ = save_map(_grid(), tmp_path / "m", mode="scale", free_thresh=0.0, occupied_thresh=0.0)
   doc = yaml.safe_load(yml.read_text())
   assert (doc["occupied_thresh"], doc["free_thresh"]) == (0.65, 0.25)
-  assert "occupied_thresh: 0.650\nfree_thresh: 0.250\n" in yml.read_text()
+  assert "occupied_thresh: 0.65\nfree_thresh: 0.25\n" in yml.read_text()
 
 
 def test_save_write_error(tmp_path):
@@ -609,3 +611,523 @@ def test_save_rejects(tmp_path, kwargs, error, match):
   grid, path = args.pop("grid"), tmp_path / args.pop("path")
   with pytest.raises(error, match=match):
     save_map(grid, path, **args)
+
+
+# =========================================================================== issue 7 / 8
+# Each test in this part fails on main (before strict loading, exact saving and metadata).
+
+import dataclasses  # noqa: E402
+import os  # noqa: E402
+import struct  # noqa: E402
+import threading  # noqa: E402
+import time as _time  # noqa: E402
+import zlib  # noqa: E402
+
+import jaxfilters  # noqa: E402
+from jaxfilters import map_decode  # noqa: E402
+from jaxfilters.map_io import MAX_MAP_CELLS, MapMetadata, load_map_with_metadata  # noqa: E402
+from tests.fuzz_inputs import encode_png, png_chunk  # noqa: E402
+
+
+def _yaml_text(path: Path, **over) -> Path:
+  """A map YAML with raw (unquoted) YAML text for the given keys."""
+  fields = dict(image="m.pgm", resolution="0.05", origin="[1.0, 2.0, 0.5]", negate="0",
+                occupied_thresh="0.65", free_thresh="0.196") | over
+  path.write_text("".join(f"{k}: {v}\n" for k, v in fields.items()))
+  return path
+
+
+# --------------------------------------------------------------------------- float32 geometry
+
+# resolution 1e-50 is 0.0 in float32: every pose up and right of the origin, even 1e6 m away,
+# gives (x - ox) / res = inf and lands "in the mask"; 1e39 is inf in float32.
+BAD_RESOLUTIONS = [1e-50, 1e-39, 1e39, -1e39, 0.0, -0.05, float("nan"), float("inf"), 10**400,
+                   True, [0.05, 0.05], "0.05"]
+BAD_ORIGINS = [(1e39, 0.0, 0.0), (0.0, -1e39), (1e-50, 0.0, 0.0), (0.0, 0.0, 1e-45),
+               (0.0, float("nan")), (10**400, 0.0), (0.0,), (0.0, 0.0, 0.0, 0.0),
+               ((0.0, 0.0), (0.0, 0.0)), "ab"]
+
+
+@pytest.mark.parametrize("resolution", BAD_RESOLUTIONS, ids=repr)
+def test_grid_create_rejects_resolution(resolution):
+  with pytest.raises(ValueError, match="OccupancyGrid.create: resolution") as e:
+    OccupancyGrid.create(np.zeros((2, 2), np.int8), resolution)
+  assert len(str(e.value)) < 300
+
+
+@pytest.mark.parametrize("origin", BAD_ORIGINS, ids=repr)
+def test_grid_create_rejects_origin(origin):
+  with pytest.raises(ValueError, match="OccupancyGrid.create: origin"):
+    OccupancyGrid.create(np.zeros((2, 2), np.int8), 0.05, origin)
+
+
+@pytest.mark.parametrize("frame_id", ["", 5, None])
+def test_grid_create_rejects_frame_id(frame_id):
+  with pytest.raises(ValueError, match="frame_id"):
+    OccupancyGrid.create(np.zeros((2, 2), np.int8), 0.05, frame_id=frame_id)
+
+
+def test_grid_create_keeps_float64_values():
+  g = OccupancyGrid.create(np.array([[-1, 0, 100]], np.int16), 0.05, (1.1, -2.2))
+  assert g.data.dtype == np.int8 and g.data.tolist() == [[-1, 0, 100]]
+  assert type(g.resolution) is float and g.resolution == 0.05
+  assert g.origin == (1.1, -2.2, 0.0) and all(type(v) is float for v in g.origin)
+  g = OccupancyGrid.create(np.zeros((1, 1), np.int8), np.float32(0.05), np.array([0.0, 1.0, 3.0]))
+  assert g.resolution == float(np.float32(0.05)) and g.origin == (0.0, 1.0, 3.0)
+  tiny = float(np.finfo(np.float32).tiny)  # the smallest normal float32 is still accepted
+  assert OccupancyGrid.create(np.zeros((1, 1), np.int8), tiny, (-tiny, 3e38)).resolution == tiny
+
+
+@pytest.mark.parametrize("key, value", [
+    ("resolution", "1e-50"), ("resolution", "1.0e-50"), ("resolution", "1e39"),
+    ("resolution", "1.0e+39"), ("resolution", "1" + "0" * 400), ("resolution", "'1e-45'"),
+    ("origin", "[1e39, 0, 0]"), ("origin", "[0, 1.0e-50, 0]"), ("origin", "[0, 0, 1.0e+39]"),
+    ("origin", "[1" + "0" * 400 + ", 0, 0]"), ("free_thresh", "1.0e-40"),
+    ("occupied_thresh", "1" + "0" * 400), ("free_thresh", "'1_0'"), ("resolution", "'nan'"),
+    ("resolution", "'\u0660.\u0660\u0665'"), ("negate", "'\u0661'"),  # Arabic-Indic digits
+])
+def test_load_map_rejects_values_float32_cannot_hold(mapdir, key, value):
+  y = _yaml_text(mapdir / "m.yaml", **{key: value})
+  with pytest.raises(ValueError, match=f"key '{key}'") as e:
+    load_map(y)
+  assert str(y) in str(e.value) and len(str(e.value)) < 400
+
+
+def test_load_map_image_rejects_huge_threshold():
+  with pytest.raises(ValueError, match="occupied_thresh"):
+    load_map_image(G_ALL, occupied_thresh=10**400, free_thresh=0.1)
+  with pytest.raises(ValueError, match="free_thresh"):
+    load_map_image(G_ALL, occupied_thresh=0.5, free_thresh=1e-42)
+
+
+# --------------------------------------------------------------------------- regular files only
+
+
+def _finishes(fn, seconds: float = 10.0):
+  """Runs fn in a thread; returns (finished, exception or None)."""
+  out = {}
+
+  def run():
+    try:
+      fn()
+      out["error"] = None
+    except BaseException as e:  # noqa: BLE001
+      out["error"] = e
+  t = threading.Thread(target=run, daemon=True)
+  t.start()
+  t.join(seconds)
+  return not t.is_alive(), out.get("error")
+
+
+def _release_fifo(fifo: Path) -> None:
+  """Unblocks a reader stuck in open() on the FIFO (what the old loader did)."""
+  try:
+    os.close(os.open(fifo, os.O_WRONLY | os.O_NONBLOCK))
+  except OSError:
+    pass  # no reader waiting
+
+
+@pytest.mark.parametrize("which", ["yaml", "image"])
+def test_fifo_raises_at_once(mapdir, which):
+  fifo = mapdir / "fifo"
+  os.mkfifo(fifo)
+  y = mapdir / "fifo" if which == "yaml" else _write_yaml(mapdir / "m.yaml",
+                                                           **_good_fields(image="fifo"))
+  try:
+    finished, error = _finishes(lambda: load_map(y), 5.0)
+  finally:
+    _release_fifo(fifo)
+  assert finished, "load_map blocked on a FIFO"
+  assert isinstance(error, ValueError) and "FIFO" in str(error)
+
+
+@pytest.mark.parametrize("which, path, kind", [
+    ("yaml", "/dev/null", "device"), ("image", "/dev/zero", "device"), ("yaml", ".", "directory")])
+def test_non_regular_files_raise(mapdir, which, path, kind):
+  if not os.path.exists(path):
+    pytest.skip(f"{path} does not exist here")
+  if which == "yaml":
+    y = mapdir if path == "." else Path(path)
+  else:
+    y = _write_yaml(mapdir / "m.yaml", **_good_fields(image=path))
+  finished, error = _finishes(lambda: load_map(y), 5.0)
+  assert finished and isinstance(error, ValueError) and kind in str(error)
+
+
+# --------------------------------------------------------------------------- YAML parsing
+
+_BOMB = ('a: &a ["x","x","x","x","x","x","x","x","x"]\nb: &b [*a,*a,*a,*a,*a,*a,*a,*a,*a]\n'
+         'c: &c [*b,*b,*b,*b,*b,*b,*b,*b,*b]\nd: &d [*c,*c,*c,*c,*c,*c,*c,*c,*c]\n'
+         'e: &e [*d,*d,*d,*d,*d,*d,*d,*d,*d]\nf: &f [*e,*e,*e,*e,*e,*e,*e,*e,*e]\n'
+         'g: &g [*f,*f,*f,*f,*f,*f,*f,*f,*f]\nh: &h [*g,*g,*g,*g,*g,*g,*g,*g,*g]\n'
+         'image: m.pgm\nresolution: *h\n')
+
+
+@pytest.mark.parametrize("text, match", [
+    (_BOMB, "alias"),
+    ("image: m.pgm\nresolution: 0.05\nresolution: 0.1\n", "duplicate key 'resolution'"),
+    ("base: &b {negate: 0}\n<<: *b\nimage: m.pgm\n", "alias"),
+    ("<<: {negate: 0}\nimage: m.pgm\n", "merge key"),
+    ("image: m.pgm\ndeep: " + "[" * 40000 + "\n", "deeper than 16"),
+    ("image: m.pgm\nx: " + "[" * 17 + "]" * 17 + "\n", "deeper than 16"),
+    ("image: m.pgm\norigin: [2001-02-30, 0, 0]\n", "invalid map YAML"),
+    ("image: m.pgm\n---\nimage: n.pgm\n", "invalid map YAML"),
+    ("image: m.pgm\n[1, 2]: 3\n", "unhashable"),
+    ("image: !!python/object/apply:os.system ['true']\n", "invalid map YAML"),
+])
+def test_hostile_yaml(mapdir, text, match):
+  (mapdir / "m.yaml").write_text(text)
+  start = _time.perf_counter()
+  with pytest.raises(ValueError, match=match) as e:
+    load_map(mapdir / "m.yaml")
+  assert _time.perf_counter() - start < 2.0
+  assert str(mapdir / "m.yaml") in str(e.value) and len(str(e.value)) < 600
+
+
+def test_yaml_size_cap_and_encoding(mapdir):
+  y = _write_yaml(mapdir / "m.yaml", **_good_fields())
+  y.write_text(y.read_text() + "#" + "x" * map_decode.MAX_YAML_BYTES + "\n")
+  with pytest.raises(ValueError, match="bytes; at most 65536"):
+    load_map(y)
+  y.write_bytes(b"image: m\xff.pgm\n")
+  with pytest.raises(ValueError, match="not UTF-8"):
+    load_map(y)
+
+
+def test_long_values_are_cut_in_messages(mapdir):
+  for over in (dict(image="a" * 5000 + ".pgm"), dict(origin=["x" * 5000, 0, 0]),
+               dict(negate="y" * 5000), dict(mode="z" * 5000), dict(image=["i"] * 5000)):
+    with pytest.raises((ValueError, FileNotFoundError)) as e:
+      _load_fields(mapdir, **over)
+    assert len(str(e.value)) < 700, (over.keys(), len(str(e.value)))
+
+
+# --------------------------------------------------------------------------- PNG strictness
+
+GRAY = np.array([[0, 254, 254, 205], [254, 0, 100, 255], [30, 254, 0, 206]], np.uint8)
+
+
+def _png_map(mapdir: Path, png: bytes) -> Path:
+  (mapdir / "p.png").write_bytes(png)
+  return _write_yaml(mapdir / "p.yaml", **_good_fields(image="p.png"))
+
+
+def _loads_to(y: Path, pixels: np.ndarray, alpha=None) -> None:
+  expected = load_map_image(pixels, alpha, mode="trinary", occupied_thresh=0.65, free_thresh=0.196)
+  np.testing.assert_array_equal(load_map(y).data, expected)
+
+
+def _png_with_raw(raw: bytes, width: int, height: int, level: int = 6) -> bytes:
+  ihdr = struct.pack(">IIBBBBB", width, height, 8, 0, 0, 0, 0)
+  return (b"\x89PNG\r\n\x1a\n" + png_chunk(b"IHDR", ihdr) +
+          png_chunk(b"IDAT", zlib.compress(raw, level)) + png_chunk(b"IEND", b""))
+
+
+def _rows(pixels: np.ndarray) -> bytes:
+  return b"".join(b"\x00" + r.tobytes() for r in pixels)
+
+
+def test_png_reference_files_load(mapdir):
+  _loads_to(_png_map(mapdir, _png_with_raw(_rows(GRAY), 4, 3)), GRAY)
+  _loads_to(_png_map(mapdir, encode_png(GRAY, interlace=1, idat_parts=3)), GRAY)
+
+
+def test_png_zlib_stream_ending_early_raises(mapdir):
+  # A complete zlib stream holding 2 of 3 rows: Pillow fills the missing row with 0 (occupied).
+  y = _png_map(mapdir, _png_with_raw(_rows(GRAY)[:10], 4, 3))
+  with pytest.raises(ValueError, match=r"cannot decode image file .*p\.png.*decompresses to 10 "
+                                       r"bytes; 4 x 3 pixels need 15"):
+    load_map(y)
+
+
+def test_png_corrupt_pixel_data_with_valid_crc_raises(mapdir):
+  # Stored (level 0) deflate with a flipped data byte and every CRC valid: the only check left
+  # is zlib's Adler-32, which Pillow never reads when it sits in a later IDAT chunk (as here)
+  # because it stops once it has every row; the old loader read pixel 254 as 190.
+  comp = bytearray(zlib.compress(_rows(GRAY), 0))
+  comp[2 + 5 + 3] ^= 0x40  # zlib header, stored-block header, then row 0's third pixel
+  png = (b"\x89PNG\r\n\x1a\n" + png_chunk(b"IHDR", struct.pack(">IIBBBBB", 4, 3, 8, 0, 0, 0, 0))
+         + png_chunk(b"IDAT", bytes(comp[:-4])) + png_chunk(b"IDAT", bytes(comp[-4:]))
+         + png_chunk(b"IEND", b""))
+  with pytest.raises(ValueError, match="corrupt.*incorrect data check"):
+    load_map(_png_map(mapdir, png))
+
+
+def test_png_damage_raises(mapdir):
+  good = _png_with_raw(_rows(GRAY), 4, 3)
+  cases = {
+      "truncated": (good[:-5], "truncated"),
+      "crc": (good[:40] + bytes([good[40] ^ 1]) + good[41:], "CRC"),
+      "trailing": (good + b"junk", "after its IEND"),
+      "no IEND": (good[:-12], "IEND missing"),
+      "critical chunk": (good[:-12] + png_chunk(b"ABCD", b"") + good[-12:], "unknown critical"),
+  }
+  for name, (png, match) in cases.items():
+    y = _png_map(mapdir, png)
+    with pytest.raises(ValueError, match=match):
+      load_map(y)
+
+
+def test_png_palette_index_outside_palette_raises(mapdir):
+  index = np.array([[0, 1, 2, 3]], np.uint8)  # indices 2, 3 have no colour: Pillow reads black
+  png = encode_png(index, colour=3, palette=bytes([0, 0, 0, 254, 254, 254]))
+  with pytest.raises(ValueError, match="palette index 3 is outside the 2-colour palette"):
+    load_map(_png_map(mapdir, png))
+
+
+def test_png_bomb_rejected_before_decoding(mapdir):
+  # 92 bytes declaring 13000 x 13000: Pillow would allocate 169 MB (2.4 GB in the old RGBA path).
+  ihdr = struct.pack(">IIBBBBB", 13000, 13000, 8, 2, 0, 0, 0)
+  png = (b"\x89PNG\r\n\x1a\n" + png_chunk(b"IHDR", ihdr) +
+         png_chunk(b"IDAT", zlib.compress(b"\x00" * 100)) + png_chunk(b"IEND", b""))
+  y = _png_map(mapdir, png)
+  start = _time.perf_counter()
+  with pytest.raises(ValueError, match="MAX_MAP_CELLS"):
+    load_map(y)
+  ihdr = struct.pack(">IIBBBBB", 4096, 4096, 8, 0, 0, 0, 0)  # under the cap, too little data
+  (mapdir / "p.png").write_bytes(b"\x89PNG\r\n\x1a\n" + png_chunk(b"IHDR", ihdr) +
+                                 png_chunk(b"IDAT", zlib.compress(b"\x00" * 100)) +
+                                 png_chunk(b"IEND", b""))
+  with pytest.raises(ValueError, match="holds only 12 compressed bytes"):
+    load_map(y)
+  assert _time.perf_counter() - start < 2.0
+
+
+def test_cell_cap_is_checked_from_the_header(mapdir):
+  assert MAX_MAP_CELLS == 2**26
+  y = _png_map(mapdir, encode_png(GRAY))
+  assert load_map_with_metadata(y, max_cells=12)[0].data.shape == (3, 4)
+  with pytest.raises(ValueError, match="4 x 3 = 12 cells; at most 11"):
+    load_map_with_metadata(y, max_cells=11)
+  (mapdir / "m.pgm").write_bytes(b"P5\n8193 8192\n255\n" + b"\x00" * 10)
+  with pytest.raises(ValueError, match="8193 x 8192 = 67117056 cells; at most 67108864"):
+    _load_fields(mapdir)
+
+
+def test_sixteen_bit_png_transparency(mapdir):
+  raw = b"\x00" + struct.pack(">4H", 0, 1000, 65535, 1000)
+  png = (b"\x89PNG\r\n\x1a\n" + png_chunk(b"IHDR", struct.pack(">IIBBBBB", 4, 1, 16, 0, 0, 0, 0))
+         + png_chunk(b"tRNS", struct.pack(">H", 1000)) + png_chunk(b"IDAT", zlib.compress(raw))
+         + png_chunk(b"IEND", b""))
+  assert load_map(_png_map(mapdir, png)).data.tolist() == [[100, -1, 0, -1]]
+  rgb16 = encode_png(np.full((1, 2, 3), 1000), depth=16, colour=2,
+                     trns=struct.pack(">3H", 1000, 1000, 1000))
+  with pytest.raises(ValueError, match="16-bit RGB PNG with a tRNS"):
+    load_map(_png_map(mapdir, rgb16))
+
+
+# --------------------------------------------------------------------------- Netpbm / BMP / others
+
+
+@pytest.mark.parametrize("content, match", [
+    (b"P5\n3 1\n100\n\x00\xc8\x32", "sample 1 is 200, above maxval 100"),
+    (b"P5\n2 1\n1000\n\x00\x05\x03\xe9", "sample 1 is 1001, above maxval 1000"),
+    (b"P2\n3 1\n100\n0 200 50\n", "sample 1 is 200, above maxval 100"),
+    (b"P2\n3 1\n255\n0 20 50 7\n", "holds 4 samples.*surplus"),
+    (b"P2\n3 1\n255\n0 20\n", "holds 2 samples.*truncated"),
+    (b"P2\n3 1\n255\n0 1_0 5\n", "decimal"),
+    (b"P1\n3 1\n0 2 1\n", "only 0 and 1"),
+    (b"P5\n3 1\n255\n\x00\x01", "truncated: 3 x 1 needs 3 bytes"),
+    (b"P5\n3 1\n255\n\x00\x01\x02\x03", "1 bytes after"),
+    (b"P5\n3 1\n0\n\x00\x01\x02", "maxval must be 1..65535"),
+    (b"P5\n3 1\n70000\n" + b"\x00" * 6, "maxval must be 1..65535"),
+    (b"P5\n0 1\n255\n", "at least 1"),
+    (b"P5\n3 x\n255\n\x00\x01\x02", "height must be a decimal"),
+    (b"P5\n3 1\n255#c\n\x00\x01\x02", "maxval must be a decimal"),
+    (b"P5\n13000 13000\n255\n\x00", "13000 x 13000 = 169000000 cells"),
+    (b"P7\nWIDTH 1\n", "PAM or PFM"),
+    (b"\xff\xd8\xff\xe0 JFIF", "JPEG"),
+    (b"GIF89a....", "GIF"),
+])
+def test_netpbm_and_format_errors(mapdir, content, match):
+  (mapdir / "m.pgm").write_bytes(content)
+  with pytest.raises(ValueError, match=match) as e:
+    _load_fields(mapdir)
+  assert "cannot decode image file" in str(e.value) and "'image'" in str(e.value)
+
+
+def test_huge_declared_sizes_are_refused_before_reading(mapdir, monkeypatch):
+  reads = []
+  real_read = os.read
+  monkeypatch.setattr(map_decode.os, "read", lambda fd, n: reads.append(n) or real_read(fd, n))
+  (mapdir / "m.pgm").write_bytes(b"P5\n4000 4000\n255\n" + b"\x00" * 100_000)
+  with pytest.raises(ValueError, match="raster truncated: 4000 x 4000 needs 16000000 bytes"):
+    _load_fields(mapdir)
+  (mapdir / "m.pgm").write_bytes(b"P5\n40 40\n255\n" + b"\x00" * 100_000)
+  with pytest.raises(ValueError, match="98400 bytes after its 40 x 40 raster"):
+    _load_fields(mapdir)
+  (mapdir / "m.pgm").write_bytes(b"P2\n2 2\n255\n" + b" " * 200_000)
+  with pytest.raises(ValueError, match="header allows at most 65594"):
+    _load_fields(mapdir)
+  assert max(reads) <= map_decode.MAX_IMAGE_HEADER_BYTES  # only the header was read
+
+
+def test_bmp_errors(mapdir):
+  buf = __import__("io").BytesIO()
+  Image.fromarray(GRAY).save(buf, "BMP")
+  good = buf.getvalue()
+  (mapdir / "b.bmp").write_bytes(good)
+  y = _write_yaml(mapdir / "b.yaml", **_good_fields(image="b.bmp"))
+  _loads_to(y, GRAY)
+  for content, match in ((good[:-4], "does not fit"),
+                         (good[:30] + struct.pack("<I", 1) + good[34:], "compression 1"),
+                         (good[:46] + struct.pack("<I", 2) + good[50:], "palette index")):
+    (mapdir / "b.bmp").write_bytes(content)
+    with pytest.raises(ValueError, match=match):
+      load_map(y)
+
+
+def test_only_value_and_file_errors_escape_for_tiff(mapdir):
+  buf = __import__("io").BytesIO()
+  Image.fromarray(GRAY).save(buf, "TIFF")
+  (mapdir / "m.pgm").write_bytes(buf.getvalue())
+  with pytest.raises(ValueError, match="TIFF file; map images must be PNG, PGM/PPM/PBM or "
+                                       "uncompressed BMP"):
+    _load_fields(mapdir)
+
+
+# --------------------------------------------------------------------------- exact save_map
+
+
+def test_save_tiny_resolution_round_trips(tmp_path):
+  # map_saver's 3 decimals wrote "0.000", which load_map (rightly) rejects.
+  yml, _ = save_map(_grid(resolution=0.0004), tmp_path / "m")
+  assert "resolution: 0.0004\n" in yml.read_text()
+  assert load_map(yml).resolution == 0.0004
+
+
+def test_save_thresholds_past_three_decimals_round_trip(tmp_path):
+  # 0.1001 / 0.1004 were both written 0.100: load_map refused free >= occupied.
+  yml, _ = save_map(_grid(), tmp_path / "m", mode="scale", free_thresh=0.1001,
+                    occupied_thresh=0.1004)
+  _, meta = load_map_with_metadata(yml)
+  assert (meta.free_thresh, meta.occupied_thresh) == (0.1001, 0.1004)
+
+
+@settings(max_examples=40, deadline=None)
+@given(res=st.floats(F32_TINY, 1e30), xy=st.lists(st.floats(-1e30, 1e30), min_size=3,
+                                                    max_size=3),
+       free=st.floats(F32_TINY, 0.5), span=st.floats(1e-9, 0.5))
+def test_save_numbers_read_back_exactly(tmp_path_factory, res, xy, free, span):
+  xy = [0.0 if abs(v) < F32_TINY else v for v in xy]
+  d = tmp_path_factory.mktemp("exact")
+  grid = _grid(resolution=res, origin=tuple(xy))
+  yml, _ = save_map(grid, d / "m", mode="raw", free_thresh=free, occupied_thresh=free + span)
+  back, meta = load_map_with_metadata(yml)
+  assert back.resolution == res and back.origin == tuple(xy)
+  assert (meta.free_thresh, meta.occupied_thresh) == (free, free + span)
+  doc = yaml.safe_load(yml.read_text())  # plain YAML 1.1 floats too, not strings
+  assert doc["resolution"] == res and doc["origin"] == xy
+
+
+def test_save_refuses_what_load_would_reject(tmp_path):
+  for bad in (dict(resolution=1e-50), dict(resolution=1e39), dict(origin=(1e39, 0.0, 0.0))):
+    with pytest.raises(ValueError, match="resolution|origin"):
+      save_map(_grid(**bad), tmp_path / "m")
+  with pytest.raises(ValueError, match="free_thresh"):
+    save_map(_grid(), tmp_path / "m", mode="scale", free_thresh=1e-42)
+  assert not list(tmp_path.iterdir())
+
+
+# --------------------------------------------------------------------------- metadata
+
+
+def test_metadata_matches_the_yaml(nav2_maps):
+  for y in sorted(nav2_maps.glob("*.yaml")):
+    if y.stem == "nav2_params":
+      continue
+    doc = yaml.safe_load(y.read_text())
+    grid, meta = load_map_with_metadata(y)
+    np.testing.assert_array_equal(grid.data, load_map(y).data)
+    assert meta.image == doc["image"] and meta.image_path == str(y.parent / doc["image"])
+    assert meta.mode == str(doc.get("mode", "trinary")).lower()
+    assert meta.resolution == float(doc["resolution"]) == grid.resolution
+    assert meta.origin == tuple(float(v) for v in doc["origin"]) == grid.origin
+    assert meta.occupied_thresh == float(doc["occupied_thresh"])
+    assert meta.free_thresh == float(doc["free_thresh"])
+    assert meta.negate is bool(doc["negate"])
+
+
+def test_real_maps_round_trip_exactly_with_metadata(nav2_maps, tmp_path):
+  for y in sorted(nav2_maps.glob("*.yaml")):
+    if y.stem == "nav2_params":
+      continue
+    grid, meta = load_map_with_metadata(y)
+    yml, img = save_map(grid, tmp_path / y.stem, metadata=meta)
+    back, meta2 = load_map_with_metadata(yml)
+    np.testing.assert_array_equal(back.data, grid.data, err_msg=y.stem)
+    assert dataclasses.replace(meta2, image=meta.image, image_path=meta.image_path) == meta
+    assert img.suffix == Path(meta.image).suffix  # the format comes back too
+
+
+REPRESENTABLE = {"trinary": [-1, 0, 100], "raw": list(range(-1, 101)), "scale": None}
+
+
+@settings(max_examples=50, deadline=None)
+@given(mode=st.sampled_from(MAP_MODES), negate=st.booleans(), fmt=st.sampled_from(["png", "pgm"]),
+       free=st.one_of(st.just(0.0), st.floats(F32_TINY, 0.9)), span=st.floats(0.05, 1.0),
+       data=st.data())
+def test_metadata_save_is_exact_or_refuses(tmp_path_factory, mode, negate, fmt, free, span, data):
+  occupied = min(1.0, free + span)
+  meta = MapMetadata.create(resolution=0.05, origin=(1.0, -2.0, 0.3), mode=mode,
+                            occupied_thresh=occupied, free_thresh=free, negate=negate)
+  values = data.draw(st.lists(st.integers(-1, 100), min_size=12, max_size=12))
+  grid = OccupancyGrid.create(np.array(values, np.int8).reshape(3, 4), 0.05, (1.0, -2.0, 0.3))
+  # What a pixel can come back as, from the scalar reference over all 256 grays (+ alpha).
+  loadable = {_ref_pixel(g, mode, occupied, free, negate) for g in range(256)}
+  if mode == "scale" and fmt == "png":
+    loadable.add(-1)
+  d = tmp_path_factory.mktemp("meta")
+  if set(values) <= loadable:
+    yml, _ = save_map(grid, d / "m", metadata=meta, image_format=fmt)
+    back, meta2 = load_map_with_metadata(yml)
+    np.testing.assert_array_equal(back.data, grid.data)
+    assert dataclasses.replace(meta2, image="", image_path="") == meta
+  else:
+    missing = sorted(set(values) - loadable)
+    with pytest.raises(ValueError, match=rf"cannot save (cell value {missing[0]}|unknown)"):
+      save_map(grid, d / "m", metadata=meta, image_format=fmt)
+    assert not list(d.iterdir())
+
+
+def test_metadata_save_conflicts(tmp_path):
+  grid = _grid(values=np.array([0, 100, -1] * 34, np.int8))
+  meta = MapMetadata.create(resolution=grid.resolution, origin=grid.origin, mode="scale",
+                            occupied_thresh=1.0, free_thresh=0.0)
+  with pytest.raises(ValueError, match="mode 'raw' disagrees with metadata.mode 'scale'"):
+    save_map(grid, tmp_path / "m", metadata=meta, mode="raw")
+  with pytest.raises(ValueError, match="free_thresh 0.25 disagrees"):
+    save_map(grid, tmp_path / "m", metadata=meta, free_thresh=0.25)
+  with pytest.raises(ValueError, match="differ from the grid's"):
+    save_map(grid, tmp_path / "m", metadata=dataclasses.replace(meta, resolution=0.1))
+  with pytest.raises(ValueError, match="unknown .* without transparency"):
+    save_map(grid, tmp_path / "m", metadata=meta, image_format="pgm")
+  with pytest.raises(ValueError, match="free_thresh"):
+    save_map(grid, tmp_path / "m", metadata=dataclasses.replace(meta, free_thresh=1.0))
+  with pytest.raises(TypeError, match="MapMetadata"):
+    save_map(grid, tmp_path / "m", metadata={"mode": "scale"})
+  assert not list(tmp_path.iterdir())
+  # Agreeing arguments are fine; free 0.0 stays 0.0 (no map_saver default) with metadata.
+  yml, _ = save_map(grid, tmp_path / "m", metadata=meta, mode="SCALE", free_thresh=0.0)
+  assert "free_thresh: 0.0\n" in yml.read_text()
+  np.testing.assert_array_equal(load_map(yml).data, grid.data)
+
+
+def test_metadata_create_validates():
+  with pytest.raises(ValueError, match="resolution"):
+    MapMetadata.create(resolution=1e-50)
+  with pytest.raises(ValueError, match="mode"):
+    MapMetadata.create(resolution=0.05, mode="ternary")
+  with pytest.raises(ValueError, match="free_thresh must be < occupied_thresh"):
+    MapMetadata.create(resolution=0.05, occupied_thresh=0.2, free_thresh=0.3)
+  with pytest.raises(ValueError, match="negate"):
+    MapMetadata.create(resolution=0.05, negate="yes")
+  m = MapMetadata.create(resolution=0.05, origin=(1.0, 2.0), negate=1)
+  assert m.origin == (1.0, 2.0, 0.0) and m.negate is True and m.mode == "trinary"
+  with pytest.raises(dataclasses.FrozenInstanceError):
+    m.mode = "raw"
+
+
+def test_new_names_are_public():
+  for name in ("MapMetadata", "load_map_with_metadata", "MAX_MAP_CELLS"):
+    assert name in jaxfilters.__all__ and getattr(jaxfilters, name) is not None
