@@ -19,6 +19,7 @@ through the `jaxfilters.commands` entry-point group (pyproject.toml).
 from __future__ import annotations
 
 import argparse
+import importlib.util
 import json
 import os
 import sys
@@ -202,10 +203,11 @@ def run_fleet(args) -> int:
   (out / "summary.json").write_text(json.dumps(summary, indent=2))
   pose = np.concatenate(poses)
   speed = np.concatenate(speeds)
-  render_png(w, pose, speed, out / "trajectories.png")
+  render_png(w, pose, speed, out / "trajectories.png", summary=summary)
   written = [out / "summary.json", out / "trajectories.png"]
   if args.animate:
-    written.append(render_gif(w, pose, speed, out / "fleet.gif", seconds_per_frame=step_s))
+    written.append(render_gif(w, pose, speed, out / "fleet.gif", summary=summary,
+                                seconds_per_frame=step_s))
   header = (f"{scenario.name}: {args.robots} robots, {seconds:g} s simulated in {run_s:.1f} s "
             f"(setup {setup_s:.1f} s, compile {compile_s:.1f} s; "
             f"{summary['timing']['robot_steps_per_s']:.3g} robot-steps/s)")
@@ -216,8 +218,28 @@ def run_fleet(args) -> int:
   return EXIT_OK if ok or args.no_check else EXIT_VIOLATION
 
 
+def _harness_root() -> Path | None:
+  """The checkout holding benchmarks/run.py beside the sims package, or None (a wheel install)."""
+  import sims
+  root = Path(sims.__file__).resolve().parent.parent
+  return root if (root / "benchmarks" / "run.py").is_file() else None
+
+
 def run_bench(args) -> int:
+  """Runs benchmarks/run.py's main with the passed-through options; returns its exit code.
+
+  The harness is not installed with the package (pyproject.toml installs only
+  jaxfilters and sims): it is found beside the sims package of a source
+  checkout (an editable install or PYTHONPATH), else a one-line usage error.
+  """
   argv = list(getattr(args, "bench_args", []) or [])
+  root = _harness_root()
+  if root is None and importlib.util.find_spec("benchmarks") is None:
+    raise CliError("the benchmark harness (benchmarks/run.py) ships with the source checkout, not with "
+                   "the installed package; run `jaxfilters bench` from an editable install of a checkout "
+                   "(pip install -e .) or `python -m benchmarks` in one")
+  if root is not None and str(root) not in sys.path:
+    sys.path.insert(0, str(root))     # benchmarks is a checkout folder, not an installed package
   try:
     from benchmarks import run as bench_run
   except ImportError as e:
