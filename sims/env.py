@@ -157,11 +157,19 @@ class FleetEnv:
       seed: host seed for station and spawn selection.
 
     Raises:
-      ValueError: impl 'warp' without a CUDA GPU, or a scenario problem (see build_world).
+      ValueError: impl 'warp' without a CUDA GPU or without warp-lang, or a
+        scenario problem (see build_world).
     """
     if config.impl == "warp" and not any(d.platform == "gpu" for d in jax.devices()):
       raise ValueError("FleetConfig.impl='warp' needs a CUDA GPU and warp-lang "
                        "(pip install 'mujoco-mjx[warp]'); use impl='jax' on CPU")
+    if config.impl == "warp":
+      from mujoco.mjx import warp as mjx_warp  # noqa: PLC0415 - its import messages: sims/__init__.py
+      if not mjx_warp.WARP_INSTALLED:
+        import sims  # noqa: PLC0415
+        said = "; ".join(sims.MJX_WARP_MESSAGES) or "warp not importable"
+        raise ValueError(f"FleetConfig.impl='warp' needs warp-lang, which mujoco.mjx could not import "
+                         f"({said}); pip install 'jaxfilters[warp]'")
     world = build_world(scenario or Scenario.default(), config, seed=seed)
     m = load_robot_model(config)
     mx = mjx.put_model(m, impl=config.impl)
