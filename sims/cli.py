@@ -51,7 +51,14 @@ class _Progress:
 
 
 def register_fleet(sub) -> argparse.ArgumentParser:
-  """Adds `jaxfilters fleet` to the library CLI's subparsers."""
+  """Adds `jaxfilters fleet` to the library CLI's subparsers.
+
+  Args:
+    sub: argparse's subparsers object (from `jaxfilters.cli.build_parser`).
+
+  Returns:
+    The `fleet` parser (its `func` default is `run_fleet`).
+  """
   p = sub.add_parser("fleet", help="simulate a robot fleet in MJX with speed and keepout filters",
                      description="Simulate a fleet of differential-drive robots in MJX. Every velocity "
                      "command is clipped by the Nav2 speed filter and keepout zones are never entered.")
@@ -115,6 +122,21 @@ def _table(summary: dict, header: str) -> str:
 
 
 def run_fleet(args) -> int:
+  """Runs `jaxfilters fleet` with parsed arguments.
+
+  Writes OUT/summary.json, OUT/trajectories.png and with --animate OUT/fleet.gif,
+  and prints the summary table on stdout (progress on stderr).
+
+  Args:
+    args: the argparse namespace of the `fleet` parser.
+
+  Returns:
+    The exit code: 0, or 3 if a robot entered a keepout cell or broke a speed
+    limit (0 anyway with --no-check).
+
+  Raises:
+    CliError: an inconsistent option (--robots, --robots-per-world, a partial set of maps).
+  """
   t_start = time.perf_counter()
   if not args.no_cache:
     _enable_cache()
@@ -226,11 +248,20 @@ def _harness_root() -> Path | None:
 
 
 def run_bench(args) -> int:
-  """Runs benchmarks/run.py's main with the passed-through options; returns its exit code.
+  """Runs benchmarks/run.py's main with the passed-through options.
 
   The harness is not installed with the package (pyproject.toml installs only
   jaxfilters and sims): it is found beside the sims package of a source
   checkout (an editable install or PYTHONPATH), else a one-line usage error.
+
+  Args:
+    args: the argparse namespace; `args.bench_args` holds the options passed through.
+
+  Returns:
+    The harness's exit code, or 1 if benchmarks/run.py cannot be imported.
+
+  Raises:
+    CliError: no benchmarks/ beside the sims package and none importable.
   """
   argv = list(getattr(args, "bench_args", []) or [])
   root = _harness_root()
@@ -253,7 +284,14 @@ def run_bench(args) -> int:
 
 
 def register_bench(sub) -> argparse.ArgumentParser:
-  """Adds `jaxfilters bench` (options pass through to benchmarks/run.py)."""
+  """Adds `jaxfilters bench` (options pass through to benchmarks/run.py).
+
+  Args:
+    sub: argparse's subparsers object.
+
+  Returns:
+    The `bench` parser (no --help of its own: `jaxfilters bench --help` shows the harness's).
+  """
   p = sub.add_parser("bench", help="run the benchmark harness (benchmarks/run.py); options pass through",
                      add_help=False)
   p.set_defaults(func=run_bench, passthrough="bench_args")
@@ -261,7 +299,14 @@ def register_bench(sub) -> argparse.ArgumentParser:
 
 
 def main(argv=None) -> int:
-  """Kept for `python -m sims.cli`: the same as the `jaxfilters` console script."""
+  """Kept for `python -m sims.cli`: the same as the `jaxfilters` console script.
+
+  Args:
+    argv: command-line arguments without the program name (default sys.argv[1:]).
+
+  Returns:
+    The exit code (see jaxfilters/cli.py).
+  """
   from jaxfilters.cli import main as cli_main
   return cli_main(argv)
 

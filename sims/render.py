@@ -121,7 +121,14 @@ def speed_zones(scenario, max_speed: float | None = None) -> list[dict[str, Any]
 
 
 def zone_colour(index: int) -> str:
-  """Colour of the index-th speed zone (0-based over zones 1..Z-1); none of them red."""
+  """Colour of the index-th speed zone (0-based over zones 1..Z-1); none of them red.
+
+  Args:
+    index: 0 for zone 1, 1 for zone 2, ...
+
+  Returns:
+    A matplotlib colour string ("#rrggbb").
+  """
   if index < len(ZONE_COLOURS):
     return ZONE_COLOURS[index]
   rgb = colormaps["twilight"]((index * 0.618) % 1.0)    # many zones: spread, never keepout red
