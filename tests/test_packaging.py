@@ -1,11 +1,13 @@
 """Packaging: what the wheel installs, the extras, `jaxfilters bench` without the harness, import noise."""
 
+import importlib.util
 import os
 import subprocess
 import sys
 import tomllib
 from pathlib import Path
 
+import pytest
 import setuptools
 
 import sims
@@ -58,17 +60,30 @@ def test_harness_is_found_beside_the_sims_package():
   assert sims_cli._harness_root() == ROOT
 
 
-def test_importing_the_simulator_prints_nothing():
-  code = "import sims.env, sims.bench, sims; print('kept', len(sims.MJX_WARP_MESSAGES))"
+_BLOCK_WARP = """
+import importlib.abc, sys
+class _NoWarp(importlib.abc.MetaPathFinder):   # as if warp-lang were not installed
+  def find_spec(self, name, path, target=None):
+    if name == "warp" or name.startswith("warp."):
+      raise ModuleNotFoundError("No module named 'warp'", name="warp")
+    return None
+sys.meta_path.insert(0, _NoWarp())
+"""
+
+
+@pytest.mark.parametrize("warp", ["absent", "as installed"])
+def test_importing_the_simulator_prints_nothing(warp):
+  code = (_BLOCK_WARP if warp == "absent" else "") + (
+      "import sims.env, sims.bench, sims, mujoco.mjx.warp as w\n"
+      "print('kept', len(sims.MJX_WARP_MESSAGES), 'warp', w.WARP_INSTALLED)")
   proc = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=120, cwd=ROOT,
                         env=dict(os.environ, PYTHONPATH=str(ROOT)))
   assert proc.returncode == 0, proc.stderr[-2000:]
-  try:
-    import warp  # noqa: F401
-    warp_installed = True
-  except ImportError:
-    warp_installed = False
-  want = "kept 0" if warp_installed else "kept 2"
+  if warp == "absent":
+    want = "kept 2 warp False"              # both expected lines captured, nothing printed
+  else:
+    installed = importlib.util.find_spec("warp") is not None
+    want = "kept 0 warp True" if installed else "kept 2 warp False"
   assert proc.stdout.strip() == want, proc.stdout
   assert "Failed to import" not in proc.stderr
 
