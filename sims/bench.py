@@ -40,10 +40,19 @@ def _best_of(fn, args, repeats: int) -> float:
 
 
 def bare_mjx_rollout(config: FleetConfig, num_robots: int, num_steps: int):
-  """(jitted fn(data) -> data, batched Data [B]): `lax.scan` of vmapped mjx.step, no filters.
+  """The bare MJX step of B robots: `lax.scan` of vmapped mjx.step, no filters.
 
   Each robot drives a constant differential-drive twist (0.4 m/s, 0.3 rad/s),
   turned into world velocities from its yaw every step, as the fleet does.
+
+  Args:
+    config: FleetConfig (physics timestep, robot radius, MJX impl).
+    num_robots: B.
+    num_steps: physics steps per call.
+
+  Returns:
+    (jitted fn(data) -> data after num_steps, the initial mjx.Data batched over
+    B with random yaw).
   """
   m = load_robot_model(config)
   mx = mjx.put_model(m, impl=config.impl)

@@ -19,6 +19,7 @@ through the `jaxfilters.commands` entry-point group (pyproject.toml).
 from __future__ import annotations
 
 import argparse
+import importlib.util
 import json
 import math
 import os
@@ -51,7 +52,14 @@ class _Progress:
 
 
 def register_fleet(sub) -> argparse.ArgumentParser:
-  """Adds `jaxfilters fleet` to the library CLI's subparsers."""
+  """Adds `jaxfilters fleet` to the library CLI's subparsers.
+
+  Args:
+    sub: argparse's subparsers object (from `jaxfilters.cli.build_parser`).
+
+  Returns:
+    The `fleet` parser (its `func` default is `run_fleet`).
+  """
   p = sub.add_parser("fleet", help="simulate a robot fleet in MJX with speed and keepout filters",
                      description="Simulate a fleet of differential-drive robots in MJX. Every velocity "
                      "command is clipped by the Nav2 speed filter and keepout zones are never entered.")
@@ -154,6 +162,21 @@ def _table(summary: dict, header: str) -> str:
 
 
 def run_fleet(args) -> int:
+  """Runs `jaxfilters fleet` with parsed arguments.
+
+  Writes OUT/summary.json, OUT/trajectories.png and with --animate OUT/fleet.gif,
+  and prints the summary table on stdout (progress on stderr).
+
+  Args:
+    args: the argparse namespace of the `fleet` parser.
+
+  Returns:
+    The exit code: 0, or 3 if a robot entered a keepout cell or broke a speed
+    limit (0 anyway with --no-check).
+
+  Raises:
+    CliError: an inconsistent option (--robots, --robots-per-world, a partial set of maps).
+  """
   t_start = time.perf_counter()
   if not args.no_cache:
     _enable_cache()
@@ -249,10 +272,11 @@ def run_fleet(args) -> int:
   (out / "summary.json").write_text(json.dumps(summary, indent=2))
   pose = np.concatenate(poses)
   speed = np.concatenate(speeds)
-  render_png(w, pose, speed, out / "trajectories.png")
+  render_png(w, pose, speed, out / "trajectories.png", summary=summary)
   written = [out / "summary.json", out / "trajectories.png"]
   if args.animate:
-    written.append(render_gif(w, pose, speed, out / "fleet.gif", seconds_per_frame=step_s))
+    written.append(render_gif(w, pose, speed, out / "fleet.gif", summary=summary,
+                                seconds_per_frame=step_s))
   header = (f"{scenario.name}: {args.robots} robots, {seconds:g} s simulated in {run_s:.1f} s "
             f"(setup {setup_s:.1f} s, compile {compile_s:.1f} s; "
             f"{summary['timing']['robot_steps_per_s']:.3g} robot-steps/s)")
@@ -263,8 +287,37 @@ def run_fleet(args) -> int:
   return EXIT_OK if ok or args.no_check else EXIT_VIOLATION
 
 
+def _harness_root() -> Path | None:
+  """The checkout holding benchmarks/run.py beside the sims package, or None (a wheel install)."""
+  import sims
+  root = Path(sims.__file__).resolve().parent.parent
+  return root if (root / "benchmarks" / "run.py").is_file() else None
+
+
 def run_bench(args) -> int:
+  """Runs benchmarks/run.py's main with the passed-through options.
+
+  The harness is not installed with the package (pyproject.toml installs only
+  jaxfilters and sims): it is found beside the sims package of a source
+  checkout (an editable install or PYTHONPATH), else a one-line usage error.
+
+  Args:
+    args: the argparse namespace; `args.bench_args` holds the options passed through.
+
+  Returns:
+    The harness's exit code, or 1 if benchmarks/run.py cannot be imported.
+
+  Raises:
+    CliError: no benchmarks/ beside the sims package and none importable.
+  """
   argv = list(getattr(args, "bench_args", []) or [])
+  root = _harness_root()
+  if root is None and importlib.util.find_spec("benchmarks") is None:
+    raise CliError("the benchmark harness (benchmarks/run.py) ships with the source checkout, not with "
+                   "the installed package; run `jaxfilters bench` from an editable install of a checkout "
+                   "(pip install -e .) or `python -m benchmarks` in one")
+  if root is not None and str(root) not in sys.path:
+    sys.path.insert(0, str(root))     # benchmarks is a checkout folder, not an installed package
   try:
     from benchmarks import run as bench_run
   except ImportError as e:
@@ -278,7 +331,14 @@ def run_bench(args) -> int:
 
 
 def register_bench(sub) -> argparse.ArgumentParser:
-  """Adds `jaxfilters bench` (options pass through to benchmarks/run.py)."""
+  """Adds `jaxfilters bench` (options pass through to benchmarks/run.py).
+
+  Args:
+    sub: argparse's subparsers object.
+
+  Returns:
+    The `bench` parser (no --help of its own: `jaxfilters bench --help` shows the harness's).
+  """
   p = sub.add_parser("bench", help="run the benchmark harness (benchmarks/run.py); options pass through",
                      add_help=False)
   p.set_defaults(func=run_bench, passthrough="bench_args")
@@ -286,7 +346,14 @@ def register_bench(sub) -> argparse.ArgumentParser:
 
 
 def main(argv=None) -> int:
-  """Kept for `python -m sims.cli`: the same as the `jaxfilters` console script."""
+  """Kept for `python -m sims.cli`: the same as the `jaxfilters` console script.
+
+  Args:
+    argv: command-line arguments without the program name (default sys.argv[1:]).
+
+  Returns:
+    The exit code (see jaxfilters/cli.py).
+  """
   from jaxfilters.cli import main as cli_main
   return cli_main(argv)
 

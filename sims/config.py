@@ -118,6 +118,7 @@ class PlannerConfig:
 
   @property
   def num_rollout_steps(self) -> int:
+    """Rollout points per candidate: horizon / rollout_dt (a whole number, checked at construction)."""
     return _ratio("PlannerConfig", "horizon", self.horizon, "rollout_dt", self.rollout_dt)
 
 
@@ -199,6 +200,7 @@ class FleetConfig:
 
   @property
   def control_dt(self) -> float:
+    """Seconds per controller tick (1 / controller_hz)."""
     return 1.0 / self.controller_hz
 
   @property

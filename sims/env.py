@@ -111,13 +111,28 @@ def mjx_step(model: mjx.Model, data: mjx.Data, ctrl: jax.Array) -> mjx.Data:
 
   MJX broadcasts across ranks internally, so this traces with rank promotion
   allowed even where a caller (e.g. the test suite) sets it to 'raise'.
+
+  Args:
+    model: the robot's mjx.Model.
+    data: one robot's mjx.Data (qpos = x m, y m, yaw rad).
+    ctrl: float32 [3] velocity-actuator targets (vx m/s, vy m/s, yaw rate rad/s, world frame).
+
+  Returns:
+    The mjx.Data one physics step (model timestep) later.
   """
   with jax.numpy_rank_promotion("allow"):
     return mjx.step(model, data.replace(ctrl=ctrl))
 
 
 def load_robot_model(config: FleetConfig) -> mujoco.MjModel:
-  """The shipped planar robot MJCF with the config's timestep and radius."""
+  """The shipped planar robot MJCF with the config's timestep and radius.
+
+  Args:
+    config: FleetConfig (physics_dt in s, robot.radius in m).
+
+  Returns:
+    A mujoco.MjModel of one robot (sims/assets/planar_robot.xml, contacts off).
+  """
   m = mujoco.MjModel.from_xml_path(str(ROBOT_XML))
   m.opt.timestep = config.physics_dt
   gid = mujoco.mj_name2id(m, mujoco.mjtObj.mjOBJ_GEOM, "chassis")
@@ -157,11 +172,19 @@ class FleetEnv:
       seed: host seed for station and spawn selection.
 
     Raises:
-      ValueError: impl 'warp' without a CUDA GPU, or a scenario problem (see build_world).
+      ValueError: impl 'warp' without a CUDA GPU or without warp-lang, or a
+        scenario problem (see build_world).
     """
     if config.impl == "warp" and not any(d.platform == "gpu" for d in jax.devices()):
       raise ValueError("FleetConfig.impl='warp' needs a CUDA GPU and warp-lang "
                        "(pip install 'mujoco-mjx[warp]'); use impl='jax' on CPU")
+    if config.impl == "warp":
+      from mujoco.mjx import warp as mjx_warp  # noqa: PLC0415 - its import messages: sims/__init__.py
+      if not mjx_warp.WARP_INSTALLED:
+        import sims  # noqa: PLC0415
+        said = "; ".join(sims.MJX_WARP_MESSAGES) or "warp not importable"
+        raise ValueError(f"FleetConfig.impl='warp' needs warp-lang, which mujoco.mjx could not import "
+                         f"({said}); pip install 'jaxfilters[warp]'")
     world = build_world(scenario or Scenario.default(), config, seed=seed)
     m = load_robot_model(config)
     mx = mjx.put_model(m, impl=config.impl)
@@ -170,6 +193,7 @@ class FleetEnv:
 
   @property
   def config(self) -> FleetConfig:
+    """The FleetConfig the world was built with."""
     return self.world.config
 
   @property
@@ -183,6 +207,14 @@ class FleetEnv:
     return tuple(0.99 * v for v in self.world.zone_speed if np.isfinite(v))
 
   def with_params(self, params: WorldParams) -> "FleetEnv":
+    """The same env reading `params` (e.g. tracers inside jit, or a swapped mask of the same shapes).
+
+    Args:
+      params: WorldParams with the same shapes as `self.params`.
+
+    Returns:
+      A new FleetEnv; self is unchanged.
+    """
     return dataclasses.replace(self, params=params)
 
   # ------------------------------------------------------------------ reset
@@ -337,12 +369,27 @@ class FleetEnv:
   # ------------------------------------------------------------------ batching
 
   def frame(self, state: WorldState) -> Frame:
-    """The recorded view of one world's state."""
+    """The recorded view of one world's state.
+
+    Args:
+      state: WorldState of one world.
+
+    Returns:
+      Frame with leaves [K, ...]: pose, speed (m/s), last command, goal, speed cap in force.
+    """
     return Frame(pose=state.data.qpos[:, :3], speed=jnp.linalg.norm(state.data.qvel[:, :2], axis=-1),
                  cmd=state.cmd, goal=state.goal, speed_cap=state.speed_cap)
 
   def world_keys(self, key: jax.Array, num_worlds: int) -> jax.Array:
-    """Per-world keys fold_in(key, w): world w's key does not depend on num_worlds."""
+    """Per-world keys fold_in(key, w): world w's key does not depend on num_worlds.
+
+    Args:
+      key: PRNG key.
+      num_worlds: W.
+
+    Returns:
+      uint32 [W, 2] keys, one per world.
+    """
     return jax.vmap(lambda i: jax.random.fold_in(key, i))(jnp.arange(num_worlds))
 
   def reset_fn(self):
@@ -358,6 +405,13 @@ class FleetEnv:
     returns (final states, frames) with Frame leaves [num_steps, W, K, ...],
     or None frames when record is False. Calling it again with new states of
     the same shapes compiles nothing.
+
+    Args:
+      num_steps: env steps per call (1 / costmap_hz seconds each).
+      record: return a Frame per step (False: frames are None).
+
+    Returns:
+      A Rollout (callable; `.compile(params, states)` compiles ahead of time).
     """
     def run(params, states, actions):
       env = self.with_params(params)
@@ -393,12 +447,33 @@ class Rollout:
     return self._idle[num_worlds]
 
   def __call__(self, params: WorldParams, states: WorldState, actions=None):
+    """Runs the rollout.
+
+    Args:
+      params: WorldParams (shared by every world).
+      states: WorldState [W].
+      actions: optional int32 [num_steps, W, K] goal overrides (-1 keeps the
+        current goal); None: no overrides.
+
+    Returns:
+      (final WorldState [W], Frame with leaves [num_steps, W, K, ...] or None
+      when the rollout was built with record=False).
+    """
     return self.jitted(params, states, self._actions(states, actions))
 
   def lower(self, params: WorldParams, states: WorldState, actions=None):
+    """`jax.jit(...).lower` of the rollout for these arguments (see `__call__`); for inspecting HLO."""
     return self.jitted.lower(params, states, self._actions(states, actions))
 
   def compile(self, params: WorldParams, states: WorldState):
+    """Compiles ahead of time (to time compilation apart from running).
+
+    Args:
+      params, states: example arguments; later calls must have the same shapes.
+
+    Returns:
+      A callable `(params, states, actions=None) -> (states, frames)` like `__call__`.
+    """
     compiled = self.lower(params, states).compile()
     return lambda params, states, actions=None: compiled(params, states, self._actions(states, actions))
 

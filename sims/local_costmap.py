@@ -35,6 +35,16 @@ def window_index(xy: jax.Array, map_origin: jax.Array, res: jax.Array, n: int) -
 
   Nav2's rolling window puts the robot at the centre and moves the origin by
   whole cells, so the window stays aligned with the static map's grid.
+
+  Args:
+    xy: float32 [K, 2] robot positions (m).
+    map_origin: float32 [2] static map origin (m).
+    res: float32 [] metres per cell.
+    n: cells per window side (static).
+
+  Returns:
+    int32 [K, 2] (col, row), possibly negative or past the map (the static
+    layer is padded).
   """
   return jnp.floor((xy - map_origin[None, :] - 0.5 * n * res) / res).astype(jnp.int32)
 

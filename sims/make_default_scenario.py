@@ -94,6 +94,7 @@ def static_map_pixels() -> np.ndarray:
 
 
 def keepout_pixels() -> np.ndarray:
+  """uint8 [H, W] trinary keepout mask image (row 0 = lowest y): 0 (occupied) in KEEPOUT_ZONES, 254 elsewhere."""
   img = np.full(_shape(), PX_FREE, np.uint8)
   for box in KEEPOUT_ZONES.values():
     _box(img, *box, PX_OCCUPIED)
@@ -101,6 +102,7 @@ def keepout_pixels() -> np.ndarray:
 
 
 def speed_pixels() -> np.ndarray:
+  """uint8 [H, W] scale-mode speed mask image (row 0 = lowest y): SPEED_ZONES pixels, 255 (no limit) elsewhere."""
   img = np.full(_shape(), PX_NO_LIMIT, np.uint8)
   for px, _, box in SPEED_ZONES.values():
     _box(img, *box, px)
@@ -122,7 +124,14 @@ def _write_yaml(path: Path, image: str, mode: str, occupied: float, free: float)
 
 
 def write(out_dir: Path = ASSETS) -> list[Path]:
-  """Writes the six scenario files into out_dir; returns their paths."""
+  """Writes the six scenario files (three PGM images and their YAMLs) into out_dir.
+
+  Args:
+    out_dir: destination folder (created if missing; default sims/assets).
+
+  Returns:
+    The written paths.
+  """
   out_dir.mkdir(parents=True, exist_ok=True)
   written = []
   for name, img, mode, occ, free in (
@@ -136,6 +145,7 @@ def write(out_dir: Path = ASSETS) -> list[Path]:
 
 
 def main(argv=None) -> None:
+  """`python -m sims.make_default_scenario [--out DIR]`: writes the files and prints their paths."""
   parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
   parser.add_argument("--out", type=Path, default=ASSETS, help="output folder (default sims/assets)")
   args = parser.parse_args(argv)

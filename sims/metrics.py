@@ -64,6 +64,17 @@ class Metrics:
 
   @classmethod
   def zeros(cls, num_robots: int, num_zones: int) -> "Metrics":
+    """Metrics of K robots over Z zones before the first step.
+
+    Counters and times are 0 and min_separation is +inf (no other robot seen yet).
+
+    Args:
+      num_robots: K.
+      num_zones: Z, including zone 0 (no limit).
+
+    Returns:
+      Metrics with leaves [K] or [K, Z].
+    """
     k, z = num_robots, num_zones
     i = jnp.zeros((k,), jnp.int32)
     return cls(distance=jnp.zeros((k,), _F32), goals_reached=i, zone_time=jnp.zeros((k, z), _F32),
@@ -73,7 +84,16 @@ class Metrics:
 
 
 def zone_at(speed_mask: FilterMask, zone_table: jax.Array, xy: jax.Array) -> jax.Array:
-  """Speed zone id (int32) at one point: the robot centre's mask cell; 0 off the mask."""
+  """Speed zone id at one point: the robot centre's mask cell; 0 off the mask.
+
+  Args:
+    speed_mask: FilterMask (M = 1) of the speed filter.
+    zone_table: int32 [256] zone id by mask byte (WorldParams.zone_table).
+    xy: float32 [2] point (m) in the mask frame.
+
+  Returns:
+    int32 [] zone id (0 = no limit, or off the mask).
+  """
   _, h, w = speed_mask.data.shape
   mx, my, valid = geometry.world_to_cell(xy[0], xy[1], speed_mask.origin[0], speed_mask.resolution[0], w, h,
                                          None if speed_mask.origin_lo is None else speed_mask.origin_lo[0])
@@ -82,7 +102,15 @@ def zone_at(speed_mask: FilterMask, zone_table: jax.Array, xy: jax.Array) -> jax
 
 
 def in_keepout(keepout_mask: FilterMask, xy: jax.Array) -> jax.Array:
-  """bool: the point's keepout-mask cell is lethal (Nav2's "pose in keepout", spec §4.2)."""
+  """Whether the point's keepout-mask cell is lethal (Nav2's "pose in keepout", spec §4.2).
+
+  Args:
+    keepout_mask: FilterMask (M = 1) of the keepout filter.
+    xy: float32 [2] point (m) in the mask frame.
+
+  Returns:
+    bool []; False off the mask.
+  """
   lo = None if keepout_mask.origin_lo is None else keepout_mask.origin_lo[0]
   return pose_in_lethal_zone_one(keepout_mask.data[0], keepout_mask.origin[0], keepout_mask.resolution[0], xy,
                                  lo)

@@ -52,6 +52,7 @@ class NavField:
 
   @property
   def num_stations(self) -> int:
+    """S, the number of goal stations (fields)."""
     return self.dist.shape[0]
 
 
@@ -189,6 +190,11 @@ def descent_direction(field: NavField, goal: jax.Array, xy: jax.Array) -> jax.Ar
 
   Differences are one cell wide and one-sided where the other side is
   unreachable (next to a wall), so walls do not dominate the direction.
+
+  Args:
+    field: the shared NavField.
+    goal: int32 [] station index.
+    xy: float32 [2] point (m).
 
   Returns:
     float32 [2]; zero where the field is flat or unreachable.

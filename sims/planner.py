@@ -122,7 +122,16 @@ def rollout(pose: jax.Array, cmd: jax.Array, targets: jax.Array, config: FleetCo
 
 
 def local_cost_at(cost: jax.Array, origin: jax.Array, res: jax.Array, xy: jax.Array) -> jax.Array:
-  """Local costmap value at points xy [..., 2]; NO_INFORMATION outside the window (int32)."""
+  """Local costmap value at points; NO_INFORMATION outside the window.
+
+  Args:
+    cost: uint8 [N, N] local costmap (or `hard_cells` of it).
+    origin: float32 [2] window origin (m); res: float32 [] metres per cell.
+    xy: float32 [..., 2] points (m).
+
+  Returns:
+    int32 [...] cost per point.
+  """
   n_rows, n_cols = cost.shape
   o = jnp.reshape(origin, (1,) * (xy.ndim - 1) + (2,))
   ij = jnp.floor((xy - o) / res).astype(jnp.int32)
@@ -139,6 +148,14 @@ def speed_cap_at(speed_cap: jax.Array, mask_origin: jax.Array, mask_res: jax.Arr
   WorldParams), so this is one float floor and a gather per point. A point
   within float rounding of a cell edge may read the neighbouring cell; the
   interval rule (both ends of every rollout interval) makes that harmless.
+
+  Args:
+    speed_cap: float32 [Hs, Ws] m/s per speed-mask cell (+inf none).
+    mask_origin: float32 [2] (m); mask_res: float32 [] metres per cell.
+    xy: float32 [..., 2] points (m).
+
+  Returns:
+    float32 [...] m/s cap per point.
   """
   h, w = speed_cap.shape
   o = jnp.reshape(mask_origin, (1,) * (xy.ndim - 1) + (2,))
@@ -149,7 +166,14 @@ def speed_cap_at(speed_cap: jax.Array, mask_origin: jax.Array, mask_res: jax.Arr
 
 
 def hard_cells(cost: jax.Array) -> jax.Array:
-  """uint8 [N, N]: 1 where the cell or one of its 8 neighbours is lethal or unknown (>= 254)."""
+  """Cells a rollout must not enter: lethal or unknown (>= 254) ones and their 8 neighbours.
+
+  Args:
+    cost: uint8 [N, N] local costmap.
+
+  Returns:
+    uint8 [N, N], 1 where the cell or one of its 8 neighbours is >= 254.
+  """
   a = cost >= constants.LETHAL_OBSTACLE
   p = jnp.pad(a, 1)
   n0, n1 = a.shape
@@ -161,7 +185,17 @@ def hard_cells(cost: jax.Array) -> jax.Array:
 
 
 def limit_to_speed(limit: jax.Array, percent: jax.Array, valid: jax.Array, max_speed: float) -> jax.Array:
-  """Nav2 speed limit (percent or m/s; 0.0 = none) -> m/s cap (+inf = none)."""
+  """Nav2 speed limit (percent or m/s; 0.0 = none) -> m/s cap (+inf = none).
+
+  Args:
+    limit: float32 [...] the speed filter's published limit.
+    percent: bool [...] whether the limit is a percentage of max_speed.
+    valid: bool [...] whether a limit is known (False: no cap).
+    max_speed: m/s, the robot's maximum speed.
+
+  Returns:
+    float32 [...] cap in m/s; +inf where there is no limit.
+  """
   ms = jnp.where(percent, max_speed * limit / 100.0, limit)
   return jnp.where(valid & (limit > 0), ms, jnp.inf).astype(_F32)
 

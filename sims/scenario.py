@@ -64,6 +64,17 @@ class Scenario:
            name: str | None = None) -> "Scenario":
     """Loads three Nav2 map YAMLs with `jaxfilters.map_io.load_map`.
 
+    Args:
+      map_yaml, keepout_yaml, speed_yaml: map_server YAML files of the static
+        map, the keepout mask (Nav2 type 0) and the speed mask.
+      speed_type: 1 (percent of max speed) or 2 (m/s).
+      speed_base, speed_multiplier: limit = d * multiplier + base (Nav2's
+        CostmapFilterInfo; the defaults are Nav2 bringup's).
+      name: label for reports (default: the map YAML's stem).
+
+    Returns:
+      The Scenario.
+
     Raises:
       FileNotFoundError: a missing YAML or image.
       ValueError: a malformed map (see load_map) or bad speed info.
@@ -82,6 +93,11 @@ def speed_limit_host(d: int, speed_type: int, base: float, multiplier: float) ->
   """Nav2 getSpeedLimitAtPose for one raw mask value, in float64 (spec §5.3).
 
   Base and multiplier are rounded to float32 first, as CostmapFilterInfo carries them.
+
+  Args:
+    d: raw mask value (-1..100).
+    speed_type: 1 (percent) or 2 (m/s).
+    base, multiplier: the filter info's base and multiplier.
 
   Returns:
     (limit, valid): 0.0 means no limit; invalid for d == -1.

@@ -108,10 +108,20 @@ class World:
 
   @property
   def num_zones(self) -> int:
+    """Z, speed zones including zone 0 (no limit)."""
     return len(self.zone_labels)
 
 
 def inflation_config(resolution: float, config: FleetConfig) -> InflationConfig:
+  """The InflationConfig of both costmaps: the robot's footprint and the fleet's inflation settings.
+
+  Args:
+    resolution: metres per costmap cell.
+    config: the fleet config (robot radius and footprint padding, inflation radius, cost scaling).
+
+  Returns:
+    An InflationConfig for `jaxfilters.inflation.inflate`.
+  """
   return InflationConfig.from_footprint(
       resolution=resolution, robot_radius=config.robot.radius,
       footprint_padding=config.robot.footprint_padding, inflation_radius=config.inflation_radius,
@@ -127,7 +137,16 @@ def _global_costmap(data, origin, resolution, keepout: FilterMask, *, infl: Infl
 
 
 def global_costmap(scenario: Scenario, keepout: FilterMask, infl: InflationConfig) -> np.ndarray:
-  """Static layer, then the keepout filter as a plugin, then inflation (uint8 [H, W])."""
+  """Static layer, then the keepout filter as a plugin, then inflation.
+
+  Args:
+    scenario: the maps (the static map's grid is the costmap's).
+    keepout: FilterMask (M = 1) of the keepout filter.
+    infl: InflationConfig at the map resolution.
+
+  Returns:
+    uint8 [H, W] global costmap (Nav2 cost values).
+  """
   grid = scenario.map
   return np.asarray(_global_costmap(jnp.asarray(grid.data), jnp.asarray(np.float32(grid.origin[:2])),
                                     jnp.asarray(np.float32(grid.resolution)), keepout, infl=infl))
@@ -152,7 +171,14 @@ def _zone_tables(scenario: Scenario, max_speed: float):
 
 
 def dilate_min(a: np.ndarray) -> np.ndarray:
-  """Minimum over each cell's 3 x 3 neighbourhood (edges replicate), host NumPy."""
+  """Minimum over each cell's 3 x 3 neighbourhood (edges replicate), host NumPy.
+
+  Args:
+    a: [H, W] array (e.g. float32 m/s caps).
+
+  Returns:
+    [H, W] array of a's dtype.
+  """
   p = np.pad(a, 1, mode="edge")
   h, w = a.shape
   return np.min([p[i:i + h, j:j + w] for i in range(3) for j in range(3)], axis=0)

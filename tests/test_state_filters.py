@@ -1,5 +1,6 @@
 """Speed, binary and zone filters: reference sequences, spec examples, real Nav2 masks."""
 
+import chex
 import jax
 import jax.numpy as jnp
 import numpy as np
@@ -248,3 +249,62 @@ def test_bad_per_robot_inputs_raise_clear_errors(call):
     run(transform=np.zeros((2, 2)))
   with pytest.raises(ValueError, match="mask_index"):
     run(mask_index=np.zeros((5,), np.int32))
+
+
+class KernelJitVariantsTest(chex.TestCase):
+  """The per-robot kernels against the NumPy reference, eager and under jit (`chex.variants`).
+
+  The public filters are jitted at the edge, so only the `*_one` kernels run op by op when
+  called eagerly; both variants must give the reference's sequence exactly.
+  """
+
+  @chex.variants(with_jit=True, without_jit=True)
+  def test_speed_filter_one_sequence_matches_reference(self):
+    rng = np.random.default_rng(21)
+    data, res, origin, mask = _random_mask(rng, 1, 120.0, -1.23)
+    info = jax.tree.map(lambda x: x[0], mask.info)
+
+    @self.variant
+    def step(state, pose, enabled):
+      return sp.speed_filter_one(state, mask.data[0], mask.origin[0], mask.resolution[0], info, pose, enabled,
+                                 None)
+
+    t = 30
+    xy = _walk(rng, origin, res, data.shape, 1, t)[:, 0]
+    enabled = rng.random(t) < 0.85
+    state = jax.tree.map(lambda x: x[0], sp.SpeedState.create(1))
+    ref = reference.SpeedRef()
+    seen = set()
+    for k in range(t):
+      state, out = step(state, jnp.asarray([xy[k, 0], xy[k, 1], 0.0], jnp.float32), jnp.asarray(enabled[k]))
+      lim, valid = reference.speed_limit_at(data, origin, res, 1, np.float32(120.0), np.float32(-1.23), *xy[k])
+      want, changed = ref.process(lim, valid, enabled[k])
+      seen.add((valid, changed))
+      self.assertEqual(bool(out.changed), changed)
+      np.testing.assert_allclose(float(out.speed_limit), want, rtol=1e-6, atol=1e-6)
+    self.assertGreaterEqual(len(seen), 3)      # valid and invalid cycles, changes and repeats
+
+  @chex.variants(with_jit=True, without_jit=True)
+  def test_binary_filter_one_sequence_matches_reference(self):
+    rng = np.random.default_rng(22)
+    data, res, origin, mask = _random_mask(rng, 3, 100.0, -1.0)
+    info = jax.tree.map(lambda x: x[0], mask.info)
+    thr = np.float32(35.0)
+
+    @self.variant
+    def step(state, pose):
+      return jf.binary.binary_filter_one(state, mask.data[0], mask.origin[0], mask.resolution[0], info, pose,
+                                         jnp.asarray(True), jnp.asarray(thr), jnp.asarray(True), None)
+
+    t = 30
+    xy = _walk(rng, origin, res, data.shape, 1, t)[:, 0]
+    state = jax.tree.map(lambda x: x[0], jf.BinaryState.create(1))
+    ref = reference.BinaryRef(True, float(thr))
+    flips = 0
+    for k in range(t):
+      state, out = step(state, jnp.asarray([xy[k, 0], xy[k, 1], 0.0], jnp.float32))
+      pub = ref.process(data, origin, res, np.float32(100.0), np.float32(-1.0), xy[k, 0], xy[k, 1])
+      self.assertEqual(bool(out.published), pub)
+      self.assertEqual(bool(out.binary_state), ref.state)
+      flips += pub
+    self.assertGreater(flips, 1)
