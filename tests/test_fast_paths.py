@@ -87,7 +87,7 @@ def test_both_batch_loops_agree(seed, loop, packed):
   cfg = ko.KeepoutConfig(override_lethal_cost=bool(seed % 2), lethal_override_cost=100)
   idx = jnp.asarray(mask_index)
   win = jnp.asarray(window)
-  cost, st = jax.jit(lambda c, s: ko._aligned_batch(c, mask, idx, s, win, enabled, config=cfg, loop=loop, packed=packed))(cm, state)
+  cost, st = jax.jit(lambda c, s: ko._aligned_batch(c, mask, idx, jnp.ones_like(idx, bool), s, win, enabled, config=cfg, loop=loop, packed=packed))(cm, state)
   want = _run(cm, mask, state, window, mask_index, enabled, dataclasses.replace(cfg, aligned_fast_path=False))
   np.testing.assert_array_equal(np.asarray(cost), want[0])
   np.testing.assert_array_equal(np.asarray(st.last_pose_lethal), want[1])
