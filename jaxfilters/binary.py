@@ -31,6 +31,7 @@ class BinaryState:
 
   @classmethod
   def create(cls, num_robots: int) -> "BinaryState":
+    """Every robot's state False, as Nav2 constructs the filter (whatever `default_state` is)."""
     return cls(jnp.zeros((num_robots,), bool))
 
 

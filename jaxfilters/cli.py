@@ -53,6 +53,7 @@ class ArgumentParser(argparse.ArgumentParser):
   """argparse with one-line errors (no usage dump) and exit code 2."""
 
   def error(self, message: str):
+    """Prints one line naming the problem and exits with EXIT_USAGE (argparse's hook)."""
     self.exit(EXIT_USAGE, f"{self.prog}: error: {message} (see {self.prog} --help)\n")
 
 

@@ -71,11 +71,13 @@ class OccupancyGrid:
 
   @property
   def width(self) -> int:
+    """W, cells along x."""
     """W, the number of columns (cells along +x)."""
     return int(self.data.shape[1])
 
   @property
   def height(self) -> int:
+    """H, cells along y."""
     """H, the number of rows (cells along +y)."""
     return int(self.data.shape[0])
 

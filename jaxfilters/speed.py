@@ -51,6 +51,7 @@ class SpeedState:
 
   @classmethod
   def create(cls, num_robots: int) -> "SpeedState":
+    """Nav2's state before the first cycle: last published limit 0.0 (no limit), no path cached."""
     return cls(jnp.zeros((num_robots,), _F32), jnp.zeros((num_robots,), jnp.int32),
                jnp.zeros((num_robots,), _F32))
 
