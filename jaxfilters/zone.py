@@ -29,6 +29,7 @@ import numpy as np
 
 from jaxfilters import constants
 from jaxfilters import geometry
+from jaxfilters import validate
 from jaxfilters.speed import _mask_leaves, _transform_point
 from jaxfilters.types import FilterMask, _dataclass, robot_inputs
 
@@ -63,7 +64,8 @@ class ZoneTable:
       states: zone id (1..127 reachable from int8 masks) -> {name: value}.
 
     Raises:
-      ValueError: an id outside 1..127, or a parameter name not in `parameters`.
+      ValueError: an id outside 1..127, a parameter name not in `parameters`,
+        or a value that is not a finite float32 (NaN, beyond 3.4e38, subnormal).
     """
     cols = {n: k for k, n in enumerate(parameters)}
     if len(cols) != len(parameters):
@@ -78,7 +80,7 @@ class ZoneTable:
     for name, v in nominal_defaults.items():
       if name not in cols:
         raise ValueError(f"nominal default {name!r} is not one of the parameters {parameters}")
-      nominal[cols[name]] = v
+      nominal[cols[name]] = validate.float32_values(v, f"nominal default {name!r}", owner="ZoneTable.create")
       has_nominal[cols[name]] = True
     for zid, setpoints in states.items():
       if int(zid) != zid or not 1 <= zid < NUM_ZONES:
@@ -87,7 +89,8 @@ class ZoneTable:
       for name, v in setpoints.items():
         if name not in cols:
           raise ValueError(f"zone {zid} sets {name!r}, which is not one of the parameters {parameters}")
-        values[zid, cols[name]] = v
+        values[zid, cols[name]] = validate.float32_values(v, f"zone {zid} value of {name!r}",
+                                                          owner="ZoneTable.create")
         sets[zid, cols[name]] = True
     return cls(*(jnp.asarray(a) for a in (values, sets, configured, nominal, has_nominal)))
 

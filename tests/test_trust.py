@@ -248,3 +248,11 @@ def test_mask_origin_double_decides_the_cell():
   assert np.floor((float(x) + 15.1) / float(np.float32(0.03))) == 2               # Nav2, in double
   _, out = jf.speed_filter(mask, np.array([[x, -0.99, 0.0]], np.float32), jf.SpeedState.create(1))
   assert bool(out.valid[0]) and float(out.speed_limit[0]) == 80.0                   # cell 2: 100 - 20
+
+
+@pytest.mark.parametrize("value", [float("nan"), 1e39, 1e-40])
+def test_zone_table_refuses_values_the_device_cannot_hold(value):
+  with pytest.raises(ValueError, match="ZoneTable.create"):
+    jf.ZoneTable.create(["v"], {"v": 1.0}, {3: {"v": value}})
+  with pytest.raises(ValueError, match="ZoneTable.create"):
+    jf.ZoneTable.create(["v"], {"v": value}, {})
