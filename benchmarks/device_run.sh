@@ -20,8 +20,8 @@ nvidia-smi -L || true
 python3 -c 'import sys, jax, mujoco; print("python", sys.version.split()[0], "jax", jax.__version__, "mujoco", mujoco.__version__); print(jax.devices())'
 
 echo "== exact-arithmetic tests on the GPU (FMA contraction) -> $OUT/gpu_tests.log"
-timeout "${TEST_TIMEOUT:-200}" python3 -m pytest -q -x tests/test_geometry.py tests/test_fast_paths.py \
-  -p no:cacheprovider > "$OUT/gpu_tests.log" 2>&1
+timeout "${TEST_TIMEOUT:-300}" python3 -m pytest -q tests/test_geometry.py tests/test_fast_paths.py \
+  tests/test_keepout.py tests/test_trust.py -p no:cacheprovider > "$OUT/gpu_tests.log" 2>&1
 echo "pytest rc=$? ; tail:"; tail -n 3 "$OUT/gpu_tests.log"
 
 echo "== benchmarks (full sizes) -> $OUT/bench.json"

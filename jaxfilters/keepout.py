@@ -74,8 +74,10 @@ class KeepoutConfig:
       keepout cell, every cell the filter writes gets `lethal_override_cost`.
     lethal_override_cost: clamped to [0, 252] like Nav2 (MAX_NON_OBSTACLE).
     aligned_fast_path: let `keepout_filter` take the slice path (same integers,
-      see `_aligned_batch`) when, at run time, every robot's costmap
-      resolution equals its mask's resolution and no `transform` is given.
+      see `_aligned_batch`) when, at run time, every robot's costmap cells map
+      one to one onto consecutive mask cells (`_aligned_offsets`: equal
+      resolutions, or nearly equal ones with no cell edge between) and no
+      `transform` is given.
       The choice is one batch-wide `lax.cond`, so both paths are compiled.
   """
   override_lethal_cost: bool = False
@@ -301,8 +303,33 @@ def _processed(state, run):
       state, last_pose_lethal=jnp.where(run, state.is_pose_lethal, state.last_pose_lethal))
 
 
+def _aligned_offsets(shape, origin, res, mask_origin, mask_res):
+  """Mask cells of the first and last master cell centres, per axis, decided exactly.
+
+  Nav2 maps master cell k to mask cell floor((o + (k + 1/2) r - mo) / mr). The
+  offset floor(...) - k is monotone in k (its slope r / mr - 1 has one sign),
+  so it is the same for every k iff it is the same at k = 0 and k = size - 1:
+  then the mask cells under the costmap are the plain window starting at k0.
+  That holds whenever r == mr, and also for a double costmap resolution such
+  as 0.05 beside the float32 mask resolution 0.0500000007 unless a cell edge
+  falls between the two ends.
+
+  Returns:
+    (k0 int32 [2] (x, y) mask cell of master cell (0, 0), unit bool []).
+  """
+  h, w = shape
+  ends = jnp.asarray([[0.0, w - 1.0], [0.0, h - 1.0]], _F32)                     # [axis, end]
+  o = [t[:, None] for t in geometry._as_terms(origin)]
+  mo = [-t[:, None] for t in geometry._as_terms(mask_origin)]
+  k = geometry.floor_div_exact(geometry.cell_centre_terms(ends, o, res) + mo, mask_res)
+  unit = jnp.all((k[:, 1] - k[:, 0]) == jnp.asarray([w - 1, h - 1], jnp.int32))
+  return k[:, 0], unit
+
+
 def _aligned_slice(shape, padded_shape, origin, res, mask_origin, mask_res, window, enabled):
-  """Where a same-resolution costmap's window starts in the padded mask table, and what it visits.
+  """Where a costmap's window starts in the padded mask table, and what it visits.
+
+  Only valid when `_aligned_offsets` says `unit` (the caller checks it).
 
   Args:
     shape: (H, W) of the costmap; padded_shape: (Hm + 2H, Wm + 2W) of the table.
@@ -315,10 +342,7 @@ def _aligned_slice(shape, padded_shape, origin, res, mask_origin, mask_res, wind
   h, w = shape
   hm, wm = padded_shape[0] - 2 * h, padded_shape[1] - 2 * w
   overlap, (x0, y0, x1, y1) = _same_frame_window((hm, wm), mask_origin, mask_res, origin, res, window)
-  r = geometry._as_terms(res)[0]          # the path only runs when res is exactly float32 == mask_res
-  k0 = geometry.floor_div_exact(
-      [*geometry._as_terms(origin), *geometry.exact_product(jnp.ones((2,), _F32), 0.5 * r),
-       *[-t for t in geometry._as_terms(mask_origin)]], r)
+  k0, _ = _aligned_offsets(shape, origin, res, mask_origin, mask_res)
   sx = jnp.clip(k0[0], -w, wm) + w
   sy = jnp.clip(k0[1], -h, hm) + h
   run = enabled & overlap
@@ -469,12 +493,14 @@ def _aligned_batch(costmap, mask, idx, idx_ok, state, window, enabled, *, config
     words = _shifted_words(table)
 
     def one(cost, origin, origin_lo, res, res_lo, i, ok, st, win, en):
-      return _aligned_packed_one(cost, geometry.origin_terms(origin, origin_lo), res, words, i,
+      return _aligned_packed_one(cost, geometry.origin_terms(origin, origin_lo),
+                                 geometry.resolution_terms(res, res_lo), words, i,
                                  _mask_origin(mask, i), mask.resolution[i], st, win, en, config=config,
                                  padded_shape=table.shape[1:], index_ok=ok)
   else:
     def one(cost, origin, origin_lo, res, res_lo, i, ok, st, win, en):
-      return _aligned_one(cost, geometry.origin_terms(origin, origin_lo), res, table, i,
+      return _aligned_one(cost, geometry.origin_terms(origin, origin_lo),
+                          geometry.resolution_terms(res, res_lo), table, i,
                           _mask_origin(mask, i), mask.resolution[i], st, win, en, config=config,
                           index_ok=ok)
 
@@ -576,9 +602,11 @@ def _keepout_filter_jit(costmap, mask, idx, idx_ok, state, window, enabled, tran
       return jax.lax.map(lambda a: one(*a), args, batch_size=max(1, _GENERAL_CHUNK_CELLS // (h * w)))
 
     if transform is None and config.aligned_fast_path:
-      aligned = jnp.all(mask.resolution[idx] == costmap.resolution)
-      if costmap.resolution_lo is not None:
-        aligned = aligned & jnp.all(costmap.resolution_lo == 0)
+      def unit_stride(origin, origin_lo, res, res_lo, i):
+        return _aligned_offsets(costmap.cost.shape[1:], geometry.origin_terms(origin, origin_lo),
+                                geometry.resolution_terms(res, res_lo), _mask_origin(mask, i),
+                                mask.resolution[i])[1]
+      aligned = jnp.all(jax.vmap(unit_stride, in_axes=(*geo_axes, 0))(*_robot_geometry(costmap, mask), idx))
       cost, new_state = jax.lax.cond(
           aligned, lambda st: _aligned_batch(costmap, mask, idx, idx_ok, st, window, enabled, config=config),
           general, state)

@@ -151,4 +151,5 @@ def _geometry(cost, origin, resolution) -> Costmap:
   del o
   op, rp = validate.split_float64(o64), validate.split_float64(r64)
   arr = lambda x: jnp.asarray(np.ascontiguousarray(x))
-  return Costmap(cost, arr(op[..., 0]), arr(rp[..., 0]), arr(op[..., 1:]), arr(rp[..., 1:]))
+  lo = lambda x: None if not np.any(x) else arr(x)
+  return Costmap(cost, arr(op[..., 0]), arr(rp[..., 0]), lo(op[..., 1:]), lo(rp[..., 1:]))

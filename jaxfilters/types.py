@@ -184,7 +184,8 @@ class FilterMask:
         origin=jnp.asarray(np.ascontiguousarray(parts[..., 0])),
         resolution=jnp.asarray(np.stack(resolutions).astype(np.float32)),
         info=info,
-        origin_lo=jnp.asarray(np.ascontiguousarray(parts[..., 1:])))
+        # None when the origins are exactly float32: fewer terms in the exact arithmetic.
+        origin_lo=None if not np.any(parts[..., 1:]) else jnp.asarray(np.ascontiguousarray(parts[..., 1:])))
 
   def with_data(self, data) -> "FilterMask":
     """Returns this mask with new cell contents of the same shape (no recompile).
@@ -292,7 +293,9 @@ class Costmap:
       float32 rounding of the host value.
     resolution: float32 [B], metres per cell (float32 rounding).
     origin_lo: float32 [B, 2, 2] or None: the (mid, lo) parts that make the
-      host float64 origin exact (`validate.split_float64`); None = exactly float32.
+      host float64 origin exact (`validate.split_float64`); None = exactly float32
+      (`create` leaves it None then; a value that is not float32 compiles the
+      longer exact arithmetic, once).
     resolution_lo: float32 [B, 2] or None: the same for the resolution (Nav2's
       costmap resolution is a double parameter such as 0.05).
   """
@@ -347,7 +350,8 @@ class Costmap:
     except ValueError as e:
       raise ValueError(f"Costmap.create: {e}") from None
     arr = lambda x: jnp.asarray(np.ascontiguousarray(x))
-    return cls(jnp.asarray(c), arr(op[..., 0]), arr(rp[..., 0]), arr(op[..., 1:]), arr(rp[..., 1:]))
+    lo = lambda x: None if not np.any(x) else arr(x)    # exactly float32: fewer exact terms
+    return cls(jnp.asarray(c), arr(op[..., 0]), arr(rp[..., 0]), lo(op[..., 1:]), lo(rp[..., 1:]))
 
   @classmethod
   def from_grid(cls, grid: OccupancyGrid, cost, num_robots: int) -> "Costmap":

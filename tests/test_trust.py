@@ -256,3 +256,23 @@ def test_zone_table_refuses_values_the_device_cannot_hold(value):
     jf.ZoneTable.create(["v"], {"v": 1.0}, {3: {"v": value}})
   with pytest.raises(ValueError, match="ZoneTable.create"):
     jf.ZoneTable.create(["v"], {"v": value}, {})
+
+
+@pytest.mark.parametrize("seed", range(6))
+def test_aligned_path_with_double_geometry_equals_the_general_path(seed):
+  """A double costmap resolution/origin beside a float32 mask: the slice path is taken only when
+  every costmap cell maps to consecutive mask cells, and gives the general path's integers."""
+  rng = np.random.default_rng(seed)
+  res = [0.05, 0.03, 0.1][seed % 3]
+  data = rng.choice([-1, 0, 30, 100], (40, 50)).astype(np.int8)
+  mask = _keepout_mask(data, res, (-1.3 + 0.01 * seed, 2.17))
+  b = 8
+  origin = np.stack([rng.uniform(-2.5, 1.0, b), rng.uniform(1.0, 3.5, b)], 1)
+  origin = np.round(origin / res) * res + rng.choice([0.0, 1e-9, -1e-9, 0.5 * res], (b, 1))
+  cost = rng.choice([0, 50, 253, 255], (b, 24, 32)).astype(np.uint8)
+  cm = jf.Costmap.create(cost, origin, res)
+  poses = np.zeros((b, 3), np.float32)
+  fast, _ = jf.keepout_filter(cm, mask, poses, jf.KeepoutState.create(b))
+  slow, _ = jf.keepout_filter(cm, mask, poses, jf.KeepoutState.create(b),
+                              config=jf.KeepoutConfig(aligned_fast_path=False))
+  np.testing.assert_array_equal(np.asarray(fast.cost), np.asarray(slow.cost))
