@@ -15,6 +15,7 @@ from jaxfilters.keepout import (KeepoutConfig, KeepoutState, keepout_filter, kee
                                 occ_to_cost)
 from jaxfilters.map_io import load_map, load_map_image, save_map
 from jaxfilters.pipeline import LayersConfig, costmap_pipeline
+from jaxfilters.query import binary_at, keepout_cost_at, speed_limit_at, zone_at
 from jaxfilters.speed import (LookaheadConfig, SpeedResult, SpeedState, speed_filter,
                               speed_filter_lookahead)
 from jaxfilters.static_layer import StaticLayerConfig, static_layer
@@ -25,8 +26,8 @@ __all__ = [
     "__version__", "BinaryResult", "BinaryState", "Costmap", "FilterInfo", "FilterMask", "InflationConfig",
     "KeepoutConfig", "KeepoutState", "LayersConfig", "LookaheadConfig", "OccupancyGrid",
     "SpeedResult", "SpeedState", "StaticLayerConfig", "ZoneResult", "ZoneState", "ZoneTable",
-    "binary_filter", "constants", "costmap_pipeline", "footprint_radii", "inflate",
-    "keepout_filter", "keepout_update_bounds", "load_map", "load_map_image", "occ_to_cost",
-    "save_map", "speed_filter", "speed_filter_lookahead", "static_layer", "world_to_cell",
-    "zone_filter",
+    "binary_at", "binary_filter", "constants", "costmap_pipeline", "footprint_radii", "inflate",
+    "keepout_cost_at", "keepout_filter", "keepout_update_bounds", "load_map", "load_map_image", "occ_to_cost",
+    "save_map", "speed_filter", "speed_limit_at", "speed_filter_lookahead", "static_layer", "world_to_cell",
+    "zone_at", "zone_filter",
 ]
