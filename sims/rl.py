@@ -115,7 +115,8 @@ class NavEnvConfig:
     speed_penalty: reward subtracted per second above the mask's speed limit.
     clip_penalty: reward subtracted per (m/s x s) of command the speed filter clipped.
     approach_penalty: reward subtracted per (m/s x s) by which the command at the end of a
-      step exceeds the strictest speed-mask limit 0.25-0.5 m ahead (teaches braking before
+      step exceeds the strictest speed-mask limit 0.25-0.5 m ahead in the direction of
+      motion (teaches braking before
       a slower zone, where the reactive filter can only clip one controller tick late).
     time_penalty: reward subtracted per env step.
   """
@@ -491,7 +492,8 @@ class NavEnv(mjx_env.MjxEnv):
 
     c_end, s_end = jnp.cos(data.qpos[:, 2]), jnp.sin(data.qpos[:, 2])
     ahead = jnp.asarray(AHEAD[:2], _F32)
-    ahead_pts = xy[:, None, :] + ahead[None, :, None] * jnp.stack([c_end, s_end], axis=1)[:, None, :]
+    motion = jnp.where(cmd[:, :1] < 0, -1.0, 1.0) * jnp.stack([c_end, s_end], axis=1)   # reversing too
+    ahead_pts = xy[:, None, :] + ahead[None, :, None] * motion[:, None, :]
     ahead_cap = jnp.min(_mps_cap(p, ahead_pts, r.max_speed), axis=1)
     approach = jnp.maximum(jnp.abs(cmd[:, 0]) - ahead_cap, 0.0) * fc.step_seconds
     collided = acc["collide"] > 0
@@ -502,10 +504,11 @@ class NavEnv(mjx_env.MjxEnv):
                      - cfg.approach_penalty * approach - cfg.time_penalty)
     done = jnp.any(collided) | (jnp.any(entered) if cfg.keepout == "terminate" else False)
     info.update(rng=rng, goal=goal, cmd=cmd, speed=speed, cap=caps[-1], last_qpos=data.qpos, in_keepout=in_k)
-    metrics = {"progress": jnp.sum(progress), "goals_reached": jnp.sum(reached).astype(_F32),
+    metrics = dict(state.metrics)      # keys wrappers added (Brax's EvalWrapper adds "reward") stay
+    metrics.update({"progress": jnp.sum(progress), "goals_reached": jnp.sum(reached).astype(_F32),
                "keepout_entries": jnp.sum(acc["entries"]).astype(_F32),
                "collisions": jnp.sum(collided).astype(_F32), "speed_violation_s": jnp.sum(acc["over"]),
-               "clipped": jnp.sum(acc["excess"]), "bad_action": jnp.sum(bad).astype(_F32)}
+               "clipped": jnp.sum(acc["excess"]), "bad_action": jnp.sum(bad).astype(_F32)})
     obs = self._obs(task, data, info)
     return state.replace(data=data, obs=obs, reward=reward.astype(_F32), done=done.astype(_F32),
                          metrics=metrics, info=info)
@@ -526,7 +529,8 @@ class NavEnv(mjx_env.MjxEnv):
     reward = cfg.goal_bonus * goals - cfg.keepout_penalty * entries - cfg.time_penalty
     done = (entries > 0) if cfg.keepout == "terminate" else jnp.asarray(False)
     zero = jnp.zeros((), _F32)
-    metrics = {name: zero for name in self._metric_names()}
+    metrics = dict(state.metrics)
+    metrics.update({name: zero for name in self._metric_names()})
     metrics.update(goals_reached=goals.astype(_F32), keepout_entries=entries.astype(_F32),
                    bad_action=jnp.sum(bad).astype(_F32))
     info = dict(state.info, world=ws)

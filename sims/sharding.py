@@ -132,17 +132,22 @@ def local_shards(tree) -> list:
   return [[(s.index, np.asarray(s.data)) for s in leaf.addressable_shards] for leaf in jax.tree.leaves(tree)]
 
 
-def rl_batch_fns(env, mesh: Mesh | None = None):
+def rl_batch_fns(env, mesh: Mesh | None = None, *, devices=None):
   """jit(vmap(reset)) and jit(vmap(step)) of a Playground-contract env, the env axis sharded.
 
   Args:
     env: `sims.rl.NavEnv` (or any env with reset(rng) / step(state, action)).
     mesh: None (default device placement) or a mesh from `make_mesh`; then
       keys [N, 2], states and actions are sharded along N over the devices.
+    devices: instead of mesh, what `make_mesh` takes (an int, "all" or devices).
 
   Returns:
     (reset(keys [N, 2]) -> State [N], step(State [N], actions [N, A]) -> State [N]).
   """
+  if devices is not None:
+    if mesh is not None:
+      raise ValueError("give mesh or devices, not both")
+    mesh = make_mesh(devices)
   reset, step = jax.vmap(env.reset), jax.vmap(env.step)
   if mesh is None:
     return jax.jit(reset), jax.jit(step)

@@ -285,7 +285,9 @@ def plot_curve(evals: dict, path: Path, title: str) -> Path:
   axes[2].plot(x, evals["speed_violation_s"], color="tab:orange", label="s above speed limit")
   axes[2].plot(x, evals["clipped"], color="tab:purple", linestyle=":", label="clipped command (m)")
   axes[2].set_ylabel("per episode")
-  axes[2].legend(fontsize=8, loc="upper right")
+  top = max(max(evals[k]) for k in ("keepout_entries", "collisions", "speed_violation_s", "clipped"))
+  axes[2].set_ylim(0, 1.45 * max(top, 0.1))
+  axes[2].legend(fontsize=7, loc="upper left", ncol=2)
   for ax in axes:
     ax.set_xlabel("env steps (thousands)")
     ax.grid(alpha=0.3)

@@ -30,7 +30,7 @@ def _env(devices: int) -> dict:
   return env
 
 
-def _run(code: str, devices: int, timeout: float = 400) -> subprocess.CompletedProcess:
+def _run(code: str, devices: int, timeout: float = 900) -> subprocess.CompletedProcess:
   return subprocess.run([sys.executable, "-c", textwrap.dedent(code)], env=_env(devices), cwd=ROOT,
                         capture_output=True, text=True, timeout=timeout)
 
@@ -71,8 +71,8 @@ rl = NavEnv.create()
 rkeys = jax.random.split(jax.random.PRNGKey(1), 8)
 acts = jnp.tile(jnp.asarray([[1.0, 0.3]]), (8, 1))
 res = {{}}
-for name, mesh in (("plain", None), ("sharded", sharding.make_mesh(4))):
-  reset, step = sharding.rl_batch_fns(rl, mesh)
+for name, devices in (("plain", None), ("sharded", 4)):
+  reset, step = sharding.rl_batch_fns(rl, devices=devices)
   s = start = reset(rkeys)
   for _ in range(3):
     s = step(s, acts)
@@ -151,7 +151,7 @@ def test_cli_devices(tmp_path):
   """
   out = tmp_path / "fleet"
   r = subprocess.run([sys.executable, "-c", textwrap.dedent(code), str(out)], env=_env(4), cwd=ROOT,
-                     capture_output=True, text=True, timeout=400)
+                     capture_output=True, text=True, timeout=900)
   assert r.returncode == 0, r.stderr[-3000:]
   codes = json.loads([l for l in r.stdout.splitlines() if l.startswith("CODES ")][-1][6:])
   assert codes == [2, 2, 2, 0], r.stderr[-3000:]
@@ -181,7 +181,7 @@ def test_two_processes_jax_distributed(single, tmp_path):
   outs = []
   try:
     for p in procs:
-      outs.append(p.communicate(timeout=400))
+      outs.append(p.communicate(timeout=900))
   finally:
     for p in procs:
       if p.poll() is None:
