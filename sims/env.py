@@ -164,8 +164,11 @@ class FleetEnv:
                        "(pip install 'mujoco-mjx[warp]'); use impl='jax' on CPU")
     world = build_world(scenario or Scenario.default(), config, seed=seed)
     m = load_robot_model(config)
-    mx = mjx.put_model(m, impl=config.impl)
-    d0 = mjx.make_data(m, impl=config.impl)          # the MjModel form works for every impl
+    # This process's first device: MJX's default, jax.devices()[0], belongs to process 0 in a
+    # multi-process (jax.distributed) run, and other processes could not use its arrays.
+    device = jax.local_devices()[0]
+    mx = mjx.put_model(m, impl=config.impl, device=device)
+    d0 = mjx.make_data(m, impl=config.impl, device=device)   # the MjModel form works for every impl
     return cls(world=world, mj_model=m, mjx_model=mx, data0=d0, params=world.params)
 
   @property

@@ -183,7 +183,11 @@ def distributed_rollout(coordinator: str, num_processes: int, process_id: int, *
   keys = put_global(env.world_keys(jax.random.PRNGKey(seed), num_worlds), worlds_sharding(mesh))
   params = put_global(env.params, replicated(mesh))
   states = env.reset_fn(mesh=mesh)(params, keys)
-  states, frames = env.rollout_fn(num_steps, mesh=mesh)(params, states)
+  # Every input global: a process-local array (e.g. the default idle actions) would make JAX
+  # check or broadcast it across processes.
+  idle = put_global(np.full((num_steps, num_worlds, robots_per_world), -1, np.int32),
+                    worlds_sharding(mesh, leading=1))
+  states, frames = env.rollout_fn(num_steps, mesh=mesh)(params, states, idle)
   out = {}
   for name, arr in integer_outputs(states, frames).items():
     world_axis = arr.ndim - 2

@@ -58,6 +58,9 @@ def test_contract_is_playground(venv):
   assert jax.tree.structure(s2) == jax.tree.structure(s)           # scan-compatible
   assert bool(jnp.all(jnp.isfinite(s2.obs))) and float(s2.done) == 0.0
   assert env.dt == pytest.approx(0.2) and env.sim_dt == pytest.approx(0.01) and env.n_substeps == 20
+  # Keys that wrappers add to metrics survive a step (Brax's EvalWrapper adds "reward").
+  extra = s.replace(metrics={**s.metrics, "reward": s.reward})
+  assert set(jax.eval_shape(env.step, extra, jnp.zeros((2,))).metrics) == set(extra.metrics)
   # A second call with new values compiles nothing.
   before = step._cache_size()
   step(s2, jnp.asarray([-1.0, 1.0]))
