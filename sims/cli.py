@@ -131,6 +131,9 @@ def _mesh(devices, num_worlds: int):
     n = "all"
   try:
     mesh = sharding.make_mesh(n)
+  except ValueError as e:
+    raise CliError(f"--devices: {e}") from None
+  try:
     sharding.check_divisible(num_worlds, mesh)
   except ValueError as e:
     raise CliError(f"--devices: {e} (worlds = --robots / --robots-per-world)") from None

@@ -4,11 +4,22 @@
 
 The trainer is rejax 0.1.3 (`rejax.PPO`, maintained, pure JAX: rollouts,
 GAE and updates are one jitted `lax.scan`), chosen because it runs on the
-pinned jax 0.10.2; Brax 0.14.2's PPO trainer calls `jax.device_put_replicated`,
-which jax 0.10 removed (see the report in the commit history). rejax speaks
-gymnax's env API, so `GymnaxAdapter` puts a Playground-contract env behind it:
-Brax's `EpisodeWrapper` (time limit) inside, gymnax-style auto-reset outside,
-and optionally a Playground `randomization_fn` drawn per episode.
+pinned jax 0.10.2. Brax 0.14.2's PPO trainer (the newest release) stops on jax
+0.10 with `AttributeError: jax.device_put_replicated is deprecated` (removed in
+jax 0.10; brax/training/agents/ppo/train.py:756); on jax 0.9.2 it trains this
+env unchanged (`ppo.train(environment=NavEnv.create(), wrap_env_fn=
+wrapper.wrap_for_brax_training)`). rejax speaks gymnax's env API (its 5-value
+`step`; gymnax 1.0's own `Environment.step` returns 6, so the adapter does not
+subclass it), so `GymnaxAdapter` puts a Playground-contract env behind it:
+Brax's `EpisodeWrapper` (time limit) inside, auto-reset outside (to the
+episode's first state, or a fresh `reset`), and optionally a Playground
+`randomization_fn` drawn per episode.
+
+Measured on the 2-core CPU (examples/ppo_nav/): 3.1 M env steps in 356 s
+(8.7 k env steps/s, 64 envs); success (a goal reached in a 60 s episode) from
+0 % to ~80 % (mean of the last 10 evaluations), 0 keepout entries, 0
+collisions, ~0.04 s per episode above a zone's limit (one zone entry at speed,
+clipped at the next 20 Hz controller tick).
 
 Evaluation (`evaluate_policy`) runs the policy's mean action (no sampling
 noise) on `num_eval` envs for one episode each and reports, per episode:
