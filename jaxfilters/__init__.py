@@ -19,6 +19,7 @@ from jaxfilters.pipeline import LayersConfig, costmap_pipeline
 from jaxfilters.nav2 import (Nav2BinaryFilter, Nav2Costmap, Nav2Filter, Nav2KeepoutFilter, Nav2Params,
                              Nav2ParamsWarning, Nav2Readout, Nav2SpeedFilter, Nav2ZoneFilter, ZoneSetpoint,
                              ZoneStateConfig, load_params)
+from jaxfilters.query import binary_at, keepout_cost_at, speed_limit_at, zone_at
 from jaxfilters.speed import (LookaheadConfig, SpeedResult, SpeedState, speed_filter,
                               speed_filter_lookahead)
 from jaxfilters.static_layer import StaticLayerConfig, static_layer
@@ -33,10 +34,10 @@ __all__ = [
     "Nav2ZoneFilter", "OccupancyGrid",
     "SpeedResult", "SpeedState", "StaticLayerConfig", "ZoneResult", "ZoneSetpoint", "ZoneState",
     "ZoneStateConfig", "ZoneTable",
-    "binary_filter", "constants", "costmap_pipeline", "footprint_radii", "inflate",
-    "jaus", "keepout_filter", "keepout_update_bounds", "load_map", "load_map_image",
+    "binary_at", "binary_filter", "constants", "costmap_pipeline", "footprint_radii", "inflate",
+    "jaus", "keepout_cost_at", "keepout_filter", "keepout_update_bounds", "load_map", "load_map_image",
     "load_map_with_metadata", "load_params",
-    "occ_to_cost", "ros", "save_map", "speed_filter", "speed_filter_lookahead", "static_layer",
+    "occ_to_cost", "ros", "save_map", "speed_filter", "speed_filter_lookahead", "speed_limit_at", "static_layer",
     "world_to_cell",
-    "zone_filter",
+    "zone_at", "zone_filter",
 ]

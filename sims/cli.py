@@ -84,6 +84,9 @@ def register_fleet(sub) -> argparse.ArgumentParser:
                  help="simulated seconds per jitted chunk (progress granularity; default 10)")
   p.add_argument("--record-robots", type=int, default=64, help="robots drawn in the pictures (default 64)")
   p.add_argument("--impl", choices=("jax", "warp"), default="jax", help="MJX implementation (default jax)")
+  p.add_argument("--devices", default=None, metavar="N|all",
+                 help="shard the worlds over N devices (or all); the world count must be a multiple "
+                 "(default: one device, no sharding)")
   p.add_argument("--no-check", action="store_true",
                  help="exit 0 even with keepout entries or speed violations")
   p.add_argument("--no-cache", action="store_true",
@@ -161,6 +164,30 @@ def _table(summary: dict, header: str) -> str:
   return "\n".join(lines)
 
 
+def _mesh(devices, num_worlds: int):
+  """--devices N|all -> a 1-D mesh over the world axis (None: no sharding), or CliError."""
+  if devices is None:
+    return None
+  from sims import sharding
+  text = str(devices).strip().lower()
+  if text != "all":
+    try:
+      n = int(text)
+    except ValueError:
+      raise CliError(f"--devices must be a positive integer or 'all'; got {devices!r}") from None
+  else:
+    n = "all"
+  try:
+    mesh = sharding.make_mesh(n)
+  except ValueError as e:
+    raise CliError(f"--devices: {e}") from None
+  try:
+    sharding.check_divisible(num_worlds, mesh)
+  except ValueError as e:
+    raise CliError(f"--devices: {e} (worlds = --robots / --robots-per-world)") from None
+  return mesh
+
+
 def run_fleet(args) -> int:
   """Runs `jaxfilters fleet` with parsed arguments.
 
@@ -207,6 +234,7 @@ def run_fleet(args) -> int:
     raise CliError(str(e)) from None
   config = FleetConfig(robots_per_world=k, impl=args.impl)
   num_worlds = args.robots // k
+  mesh = _mesh(args.devices, num_worlds)
   step_s = config.step_seconds
   if args.steps is not None:
     total_steps = args.steps
@@ -226,8 +254,8 @@ def run_fleet(args) -> int:
     env = FleetEnv.create(scenario, config, seed=args.seed)
   except ValueError as e:      # the maps cannot host this fleet (mask resolution, free space)
     raise CliError(f"{scenario.name}: {e}") from None
-  states = env.reset_fn()(env.params, env.world_keys(jax.random.PRNGKey(args.seed), num_worlds))
-  run = env.rollout_fn(chunk)
+  states = env.reset_fn(mesh=mesh)(env.params, env.world_keys(jax.random.PRNGKey(args.seed), num_worlds))
+  run = env.rollout_fn(chunk, mesh=mesh)
   t1 = time.perf_counter()
   compiled = run.compile(env.params, states)
   compile_s = time.perf_counter() - t1
@@ -263,7 +291,7 @@ def run_fleet(args) -> int:
       "physics_dt_s": config.physics_dt, "robot_radius_m": config.robot.radius,
       "max_speed_mps": config.robot.max_speed, "max_accel_mps2": config.robot.max_accel,
       "local_costmap_m": config.local_costmap_size, "progress_timeout_s": config.progress_timeout,
-      "impl": config.impl,
+      "impl": config.impl, "devices": 1 if mesh is None else int(mesh.devices.size),
   }
   summary["timing"] = {"setup_s": setup_s, "compile_s": compile_s, "run_s": run_s,
                        "robot_steps_per_s": args.robots * total_steps * config.ticks_per_step

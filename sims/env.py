@@ -187,8 +187,11 @@ class FleetEnv:
                          f"({said}); pip install 'jaxfilters[warp]'")
     world = build_world(scenario or Scenario.default(), config, seed=seed)
     m = load_robot_model(config)
-    mx = mjx.put_model(m, impl=config.impl)
-    d0 = mjx.make_data(m, impl=config.impl)          # the MjModel form works for every impl
+    # This process's first device: MJX's default, jax.devices()[0], belongs to process 0 in a
+    # multi-process (jax.distributed) run, and other processes could not use its arrays.
+    device = jax.local_devices()[0]
+    mx = mjx.put_model(m, impl=config.impl, device=device)
+    d0 = mjx.make_data(m, impl=config.impl, device=device)   # the MjModel form works for every impl
     return cls(world=world, mj_model=m, mjx_model=mx, data0=d0, params=world.params)
 
   @property
@@ -392,11 +395,21 @@ class FleetEnv:
     """
     return jax.vmap(lambda i: jax.random.fold_in(key, i))(jnp.arange(num_worlds))
 
-  def reset_fn(self):
-    """jit(vmap(reset)) over worlds: keys [W, 2] -> WorldState [W]."""
-    return jax.jit(lambda params, keys: jax.vmap(self.with_params(params).reset)(keys))
+  def reset_fn(self, *, mesh: jax.sharding.Mesh | None = None):
+    """jit(vmap(reset)) over worlds: keys [W, 2] -> WorldState [W].
 
-  def rollout_fn(self, num_steps: int, *, record: bool = True) -> "Rollout":
+    With a 1-D `mesh` (sims/sharding.py) the world axis of keys and states is
+    sharded over its devices and params are replicated; W must split evenly.
+    """
+    fn = lambda params, keys: jax.vmap(self.with_params(params).reset)(keys)
+    if mesh is None:
+      return jax.jit(fn)
+    worlds = jax.sharding.NamedSharding(mesh, jax.sharding.PartitionSpec(mesh.axis_names[0]))
+    rep = jax.sharding.NamedSharding(mesh, jax.sharding.PartitionSpec())
+    return jax.jit(fn, in_shardings=(rep, worlds), out_shardings=worlds)
+
+  def rollout_fn(self, num_steps: int, *, record: bool = True,
+                 mesh: jax.sharding.Mesh | None = None) -> "Rollout":
     """A jitted rollout of `num_steps` env steps over W worlds (`lax.scan` of `vmap(step)`).
 
     `run(params, states, actions=None)` takes the WorldParams (a jit argument,
@@ -404,11 +417,14 @@ class FleetEnv:
     optional actions int32 [num_steps, W, K] (None: no goal overrides). It
     returns (final states, frames) with Frame leaves [num_steps, W, K, ...],
     or None frames when record is False. Calling it again with new states of
-    the same shapes compiles nothing.
+    the same shapes compiles nothing. With a 1-D `mesh` (sims/sharding.py)
+    the world axis of states, actions and frames is sharded over its devices
+    and params are replicated; the results equal the unsharded ones.
 
     Args:
       num_steps: env steps per call (1 / costmap_hz seconds each).
       record: return a Frame per step (False: frames are None).
+      mesh: optional 1-D jax.sharding.Mesh over the world axis.
 
     Returns:
       A Rollout (callable; `.compile(params, states)` compiles ahead of time).
@@ -422,7 +438,15 @@ class FleetEnv:
 
       return jax.lax.scan(body, states, actions)
 
-    return Rollout(jax.jit(run), num_steps, self.num_robots)
+    if mesh is None:
+      return Rollout(jax.jit(run), num_steps, self.num_robots)
+    spec = jax.sharding.PartitionSpec
+    worlds = jax.sharding.NamedSharding(mesh, spec(mesh.axis_names[0]))
+    time_major = jax.sharding.NamedSharding(mesh, spec(None, mesh.axis_names[0]))
+    rep = jax.sharding.NamedSharding(mesh, spec())
+    jitted = jax.jit(run, in_shardings=(rep, worlds, time_major),
+                     out_shardings=(worlds, time_major if record else None))
+    return Rollout(jitted, num_steps, self.num_robots)
 
 
 class Rollout:

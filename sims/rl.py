@@ -1,0 +1,675 @@
+"""The fleet as a reinforcement-learning environment with MuJoCo Playground's `MjxEnv` contract.
+
+    env = NavEnv.create()                                   # built-in warehouse, 1 robot per env
+    state = env.reset(jax.random.PRNGKey(0))                # State(data, obs, reward, done, metrics, info)
+    state = env.step(state, jnp.array([1.0, 0.0]))          # (v, w) in [-1, 1]
+
+    train_env = wrapper.wrap_for_brax_training(             # mujoco_playground._src.wrapper
+        env, episode_length=200, full_reset=True,
+        randomization_fn=functools.partial(randomize_zones_and_goals, rng=keys))
+
+One env is one world of K = `FleetConfig.robots_per_world` robots (1 by
+default), built from the same `World` as `sims.env.FleetEnv`. One env step is
+one local-costmap period (1 / costmap_hz, 0.2 s): `ticks_per_step` controller
+ticks (20 Hz) of `substeps_per_tick` physics steps each.
+
+Two modes (`NavEnvConfig.mode`):
+
+* `"velocity"`: the action is float32 [2K], each robot's (v, w) in [-1, 1]
+  scaled to (max_speed, max_yaw_rate). Every controller tick the command ramps
+  toward it within the robot's acceleration limits, the Nav2 speed filter runs
+  at the robot's pose (its state carried) and `clip_command` clips it to the
+  limit in force, exactly as the fleet does; then MJX steps. Entering a lethal
+  keepout cell ends the episode (`keepout="terminate"`) or only costs reward
+  (`"penalty"`); touching a static obstacle (the robot centre on an inscribed
+  or lethal cell of the inflated static layer, or off the map) always ends it.
+* `"navigation"`: the action is int32 [K] goal station ids (-1 keeps the
+  current goal), and the landed navigation stack (`FleetEnv.step`: local
+  costmaps, planner, speed filter, clip) drives; the reward counts goals.
+
+Observation (velocity mode), per robot, concatenated over K (float32 [K * 98]):
+a `crop_cells` x `crop_cells` crop of the cost around the robot in its own
+frame (max of the inflated static layer and `jaxfilters.query.keepout_cost_at`,
+/ 255, 81 values by default), the speed limit in force (cap / max_speed,
+limited flag), the limit at 3 points ahead, the goal in the robot frame (dx, dy
+/ 5 m, distance / 10 m, clipped), the navigation field's descent direction
+(robot frame) and distance / 20 m, the velocity (commanded v, w and measured
+speed, normalised), and the nearest other robot (robot frame, distance; 1.0
+when there is none).
+
+Reward (velocity mode), per robot, summed over K: `progress_weight` x metres of
+navigation-distance progress, + `goal_bonus` per goal reached (a new goal is
+then drawn), - `keepout_penalty` per keepout entry, - `collision_penalty`,
+- `speed_penalty` x seconds above the mask's limit at the robot's position
+(+ `FleetConfig.speed_tolerance`), - `clip_penalty` x (m/s x s) of commanded
+speed the filter had to clip, - `approach_penalty` x (m/s x s) of command above
+the limit 0.25-0.5 m ahead, - `time_penalty` per step.
+
+Value problems never raise under `jit` (STYLE.md habit 5): a velocity action
+outside [-1, 1] is clipped and a non-finite one zeroed, and both are counted in
+`metrics["bad_action"]`; a navigation action outside [-1, S) keeps the robot's
+goal and is counted there too. Static problems (shape, dtype) raise
+`ValueError`/`TypeError` at trace time.
+
+The world (maps, navigation field, speed and keepout masks) and the goal
+distribution ride in the model: `NavModel` is an `mjx.Model` with one more
+pytree field, `task`, so Playground's domain-randomisation wrapper batches
+zones and goals like any model field (`randomize_zones_and_goals`).
+
+Auto-reset: Playground's `BraxAutoResetWrapper(full_reset=False)` restores
+`data` and `obs` but not `info`; `step` notices (the pose differs from the one
+it left) and restarts the per-episode state (command, speed-filter state), so
+both reset styles are consistent. `full_reset=True` also draws a new goal.
+"""
+
+import dataclasses
+from typing import Any
+
+import jax
+import jax.numpy as jnp
+import mujoco
+import numpy as np
+from ml_collections import config_dict
+from mujoco import mjx
+
+try:
+  from mujoco_playground._src import mjx_env
+except ImportError as e:  # pragma: no cover - exercised only without the extra
+  raise ImportError("sims.rl needs MuJoCo Playground: pip install 'jaxfilters[rl]' "
+                    f"(playground==0.2.0; {e})") from None
+
+from jaxfilters import constants, geometry
+from jaxfilters.inflation import inflate
+from jaxfilters.query import keepout_cost_at, speed_limit_at
+from jaxfilters.speed import SpeedState, speed_filter
+from jaxfilters.static_layer import static_layer
+from sims import navigation, planner
+from sims.config import FleetConfig, RobotConfig
+from sims.env import ROBOT_XML, FleetEnv, WorldState, mjx_step
+from sims.scenario import Scenario
+from sims.world import STATIC_LAYER, WorldParams
+
+_F32 = jnp.float32
+MODES = ("velocity", "navigation")
+KEEPOUT_MODES = ("terminate", "penalty")
+AHEAD = (0.25, 0.5, 1.0)   # m, points ahead where the observation reads the speed limit
+State = mjx_env.State
+
+
+# ----------------------------------------------------------------------------- config
+
+
+@dataclasses.dataclass(frozen=True)
+class NavEnvConfig:
+  """Static options of `NavEnv` (one compile per distinct config).
+
+  Attributes:
+    mode: "velocity" (action (v, w) per robot) or "navigation" (action = goal station ids).
+    keepout: "terminate" (a keepout entry ends the episode) or "penalty" (it only costs reward).
+    crop_cells: side of the observed cost crop (odd, >= 3).
+    crop_spacing: m between crop samples (9 x 0.25 m covers 2 m around the robot).
+    progress_weight: reward per metre of navigation-distance progress.
+    goal_bonus: reward per goal reached.
+    keepout_penalty: reward subtracted per keepout entry.
+    collision_penalty: reward subtracted when the robot touches a static obstacle.
+    speed_penalty: reward subtracted per second above the mask's speed limit.
+    clip_penalty: reward subtracted per (m/s x s) of command the speed filter clipped.
+    approach_penalty: reward subtracted per (m/s x s) by which the command at the end of a
+      step exceeds the strictest speed-mask limit 0.25-0.5 m ahead in the direction of
+      motion (teaches braking before
+      a slower zone, where the reactive filter can only clip one controller tick late).
+    time_penalty: reward subtracted per env step.
+  """
+  mode: str = "velocity"
+  keepout: str = "terminate"
+  crop_cells: int = 9
+  crop_spacing: float = 0.25
+  progress_weight: float = 1.0
+  goal_bonus: float = 5.0
+  keepout_penalty: float = 10.0
+  collision_penalty: float = 10.0
+  speed_penalty: float = 100.0
+  clip_penalty: float = 2.0
+  approach_penalty: float = 20.0
+  time_penalty: float = 0.01
+
+  def __post_init__(self):
+    if self.mode not in MODES:
+      raise ValueError(f"NavEnvConfig.mode must be one of {MODES}; got {self.mode!r}")
+    if self.keepout not in KEEPOUT_MODES:
+      raise ValueError(f"NavEnvConfig.keepout must be one of {KEEPOUT_MODES}; got {self.keepout!r}")
+    c = self.crop_cells
+    if isinstance(c, bool) or int(c) != c or c < 3 or c % 2 == 0:
+      raise ValueError(f"NavEnvConfig.crop_cells must be an odd integer >= 3; got {c!r}")
+    object.__setattr__(self, "crop_cells", int(c))
+    for f in dataclasses.fields(self):
+      if f.name in ("mode", "keepout", "crop_cells"):
+        continue
+      v = getattr(self, f.name)
+      if isinstance(v, bool) or not isinstance(v, (int, float, np.floating, np.integer)) \
+          or not np.isfinite(v) or v < 0 or (f.name == "crop_spacing" and v == 0):
+        want = "> 0" if f.name == "crop_spacing" else ">= 0"
+        raise ValueError(f"NavEnvConfig.{f.name} must be a finite number {want}; got {v!r}")
+      object.__setattr__(self, f.name, float(v))
+
+
+# ----------------------------------------------------------------------------- model
+
+
+@jax.tree_util.register_dataclass
+@dataclasses.dataclass(frozen=True)
+class NavTask:
+  """The task data every step reads (all traced leaves; randomisable per env).
+
+  Attributes:
+    world: WorldParams (maps, masks, navigation field, stations, spawns).
+    static_inflated: uint8 [H, W], the static layer inflated (no keepout), on the map grid.
+    goal_logits: float32 [S], log-weights of drawing each station as a goal (-inf never).
+  """
+  world: WorldParams
+  static_inflated: jax.Array
+  goal_logits: jax.Array
+
+  def replace(self, **changes) -> "NavTask":
+    """dataclasses.replace (what `mjx.Model.tree_replace` calls on nested fields)."""
+    return dataclasses.replace(self, **changes)
+
+
+class NavModel(mjx.Model):
+  """An `mjx.Model` of one robot that also carries the `NavTask` (field `task`).
+
+  `mjx.step` reads only the inherited fields; Playground's
+  `BraxDomainRandomizationVmapWrapper` vmaps the whole model, so
+  `model.tree_replace({"task.goal_logits": ...})` randomises goals per env.
+  """
+  task: NavTask
+
+
+def nav_model(model: mjx.Model, task: NavTask) -> NavModel:
+  """Attaches a task to an mjx.Model."""
+  return NavModel(**{f.name: getattr(model, f.name) for f in dataclasses.fields(mjx.Model)}, task=task)
+
+
+# ----------------------------------------------------------------------------- kernels
+
+
+def clip_command(cmd: jax.Array, cap: jax.Array, robot: RobotConfig, limit_angular: bool) -> jax.Array:
+  """The fleet's hard clip of commands to the speed limit in force (sims/env.py `_tick`).
+
+  Args:
+    cmd: float32 [K, 2] (v m/s, w rad/s).
+    cap: float32 [K] speed cap in m/s (+inf = no limit), from `planner.limit_to_speed`.
+    robot: RobotConfig (max_speed, max_yaw_rate).
+    limit_angular: also scale the yaw rate by cap / max_speed (FleetConfig.limit_angular).
+
+  Returns:
+    float32 [K, 2]: |v| <= cap; |w| <= max_yaw_rate * min(cap / max_speed, 1) if limit_angular.
+  """
+  v = jnp.clip(cmd[:, 0], -cap, cap)
+  w = cmd[:, 1]
+  if limit_angular:
+    w_cap = robot.max_yaw_rate * jnp.minimum(cap / robot.max_speed, 1.0)
+    w = jnp.clip(w, -w_cap, w_cap)
+  return jnp.stack([v, w], axis=1)
+
+
+def _grid_value(grid: jax.Array, origin: jax.Array, res: jax.Array, xy: jax.Array, fill: int) -> jax.Array:
+  """uint8 grid value at points xy [..., 2] (exact worldToMap), `fill` off the grid (int32)."""
+  h, w = grid.shape
+  mx, my, ok = geometry.world_to_cell(xy[..., 0], xy[..., 1], origin, res, w, h)
+  return jnp.where(ok, grid[my, mx].astype(jnp.int32), fill)
+
+
+def _rotate(c, s, x, y):
+  return c * x - s * y, s * x + c * y
+
+
+def _mps_cap(p: WorldParams, xy: jax.Array, max_speed: float) -> jax.Array:
+  """Speed limit of the mask at points xy [..., 2] in m/s (+inf: none, off-mask or unknown)."""
+  limit, pct, valid = speed_limit_at(p.speed, xy)
+  return planner.limit_to_speed(limit, pct, valid, max_speed)
+
+
+def _sample_goal(key, logits, xy, current, stations):
+  """A station per robot from the goal distribution, not the current one, > 2 m away if possible."""
+  k = xy.shape[0]
+  s = stations.shape[0]
+  ids = jnp.arange(s, dtype=jnp.int32)
+  far = jnp.linalg.norm(stations[None] - xy[:, None], axis=-1) > 2.0
+  other = ids[None, :] != current[:, None]
+  base = jnp.broadcast_to(logits[None, :], (k, s))
+  pick = jnp.where(far & other, base, -jnp.inf)
+  pick = jnp.where(jnp.any(jnp.isfinite(pick), axis=1, keepdims=True), pick, jnp.where(other, base, -jnp.inf))
+  pick = jnp.where(jnp.any(jnp.isfinite(pick), axis=1, keepdims=True), pick, base)
+  return jax.vmap(jax.random.categorical)(jax.random.split(key, k), pick).astype(jnp.int32)
+
+
+# ----------------------------------------------------------------------------- env
+
+
+class NavEnv(mjx_env.MjxEnv):
+  """The fleet world as a Playground `MjxEnv` (see the module docstring).
+
+  Build with `NavEnv.create(...)`. `reset(rng)` and `step(state, action)` act
+  on one env (one world of K robots); batch with `jax.vmap` or Playground's
+  `wrap_for_brax_training`.
+  """
+
+  def __init__(self, fleet: FleetEnv, config: NavEnvConfig):
+    fc = fleet.config
+    super().__init__(config_dict.ConfigDict({"ctrl_dt": fc.step_seconds, "sim_dt": fc.physics_dt}))
+    self._fleet = fleet
+    self._nav = config
+    w = fleet.world
+    static = static_layer(jnp.asarray(w.scenario.map.data)[None], config=STATIC_LAYER)
+    inflated = np.asarray(inflate(static, config=w.inflation)[0])
+    task = NavTask(world=w.params, static_inflated=jnp.asarray(inflated),
+                   goal_logits=jnp.zeros((w.params.nav.stations.shape[0],), _F32))
+    self._mjx_model = nav_model(fleet.mjx_model, task)
+    self._crop = self._crop_offsets()
+
+  @classmethod
+  def create(cls, scenario: Scenario | None = None, fleet_config: FleetConfig | None = None,
+             config: NavEnvConfig = NavEnvConfig(), *, seed: int = 0) -> "NavEnv":
+    """Builds the world (as `FleetEnv.create`) and the env.
+
+    Args:
+      scenario: maps (default: the built-in warehouse).
+      fleet_config: FleetConfig (default: FleetConfig(robots_per_world=1)).
+      config: NavEnvConfig.
+      seed: host seed for station and spawn selection.
+
+    Raises:
+      ValueError: a bad config or scenario (see FleetEnv.create, build_world).
+      TypeError: config of the wrong type.
+    """
+    if not isinstance(config, NavEnvConfig):
+      raise TypeError(f"config must be a NavEnvConfig; got {type(config).__name__}")
+    fleet_config = FleetConfig(robots_per_world=1) if fleet_config is None else fleet_config
+    if not isinstance(fleet_config, FleetConfig):
+      raise TypeError(f"fleet_config must be a FleetConfig; got {type(fleet_config).__name__}")
+    return cls(FleetEnv.create(scenario, fleet_config, seed=seed), config)
+
+  # ------------------------------------------------------------------ contract
+
+  @property
+  def xml_path(self) -> str:
+    return str(ROBOT_XML)
+
+  @property
+  def mj_model(self) -> mujoco.MjModel:
+    return self._fleet.mj_model
+
+  @property
+  def mjx_model(self) -> NavModel:
+    return self._mjx_model
+
+  @property
+  def action_size(self) -> int:
+    """2K (velocity mode) or K (navigation mode)."""
+    k = self.num_robots
+    return 2 * k if self._nav.mode == "velocity" else k
+
+  @property
+  def observation_size(self) -> int:
+    return int(jax.eval_shape(self.reset, jax.ShapeDtypeStruct((2,), jnp.uint32)).obs.shape[-1])
+
+  # ------------------------------------------------------------------ helpers
+
+  @property
+  def fleet(self) -> FleetEnv:
+    return self._fleet
+
+  @property
+  def nav_config(self) -> NavEnvConfig:
+    return self._nav
+
+  @property
+  def fleet_config(self) -> FleetConfig:
+    return self._fleet.config
+
+  @property
+  def num_robots(self) -> int:
+    return self._fleet.num_robots
+
+  @property
+  def num_stations(self) -> int:
+    return int(self._fleet.world.params.nav.stations.shape[0])
+
+  def _crop_offsets(self) -> np.ndarray:
+    n, s = self._nav.crop_cells, self._nav.crop_spacing
+    r = (np.arange(n) - n // 2) * s
+    fx, ly = np.meshgrid(r, r, indexing="xy")          # rows: left offset, cols: forward offset
+    return np.stack([fx.ravel(), ly.ravel()], axis=1).astype(np.float32)   # [C*C, 2] robot frame
+
+  def _check_action(self, action) -> jax.Array:
+    a = jnp.asarray(action)
+    k = self.num_robots
+    if self._nav.mode == "velocity":
+      if a.shape != (2 * k,):
+        raise ValueError(f"NavEnv.step (velocity mode): action must be float [2K] = ({2 * k},), each "
+                         f"robot's (v, w) in [-1, 1]; got shape {tuple(a.shape)}")
+      if not jnp.issubdtype(a.dtype, jnp.floating):
+        raise TypeError(f"NavEnv.step (velocity mode): action must be floating point; got {a.dtype}")
+      return a.astype(_F32)
+    if a.shape != (k,):
+      raise ValueError(f"NavEnv.step (navigation mode): action must be int [K] = ({k},) goal station "
+                       f"ids in [0, {self.num_stations}) or -1 to keep the goal; got shape {tuple(a.shape)}")
+    if a.dtype == bool or not jnp.issubdtype(a.dtype, jnp.integer):
+      raise TypeError(f"NavEnv.step (navigation mode): action must be integer station ids; got {a.dtype}")
+    return a.astype(jnp.int32)
+
+  # ------------------------------------------------------------------ reset
+
+  def reset(self, rng: jax.Array) -> State:
+    """A fresh env: K robots at distinct spawn points, random yaw, goals from the goal distribution.
+
+    Args:
+      rng: PRNG key (uint32 [2]).
+
+    Returns:
+      State with obs float32 [observation_size], reward and done float32 [] (0),
+      metrics (float32 [] each) and info (the per-episode state).
+    """
+    task = self._mjx_model.task
+    fleet = self._fleet.with_params(task.world)
+    k_world, k_goal, k_rng = jax.random.split(rng, 3)
+    ws = fleet.reset(k_world)
+    xy = ws.data.qpos[:, :2]
+    goal = _sample_goal(k_goal, task.goal_logits, xy, jnp.full((self.num_robots,), -1, jnp.int32),
+                        task.world.nav.stations)
+    ws = dataclasses.replace(ws, goal=goal)
+    zero = jnp.zeros((), _F32)
+    metrics = {name: zero for name in self._metric_names()}
+    if self._nav.mode == "navigation":
+      info = {"rng": k_rng, "world": ws}
+      obs = self._nav_obs(task, ws)
+    else:
+      k = self.num_robots
+      info = {"rng": k_rng, "goal": goal, "cmd": jnp.zeros((k, 2), _F32), "speed": SpeedState.create(k),
+              "cap": jnp.full((k,), jnp.inf, _F32), "last_qpos": ws.data.qpos,
+              "in_keepout": jnp.zeros((k,), bool)}
+      obs = self._obs(task, ws.data, info)
+    return State(data=ws.data, obs=obs, reward=zero, done=zero, metrics=metrics, info=info)
+
+  def _metric_names(self):
+    return ("progress", "goals_reached", "keepout_entries", "collisions", "speed_violation_s",
+            "clipped", "bad_action")
+
+  # ------------------------------------------------------------------ step
+
+  def step(self, state: State, action: jax.Array) -> State:
+    """Advances one env by one costmap period (0.2 s by default).
+
+    Args:
+      state: State of one env.
+      action: velocity mode float32 [2K], (v, w) per robot in [-1, 1];
+        navigation mode int32 [K], goal station ids (-1 keeps the goal).
+
+    Returns:
+      The next State: reward float32 [], done float32 [] (1.0 ends the episode),
+      metrics of this step (float32 [] each, summed over robots).
+
+    Raises:
+      ValueError / TypeError: an action of the wrong shape or dtype.
+    """
+    action = self._check_action(action)
+    with jax.named_scope("nav_env_step"):
+      if self._nav.mode == "navigation":
+        return self._step_navigation(state, action)
+      return self._step_velocity(state, action)
+
+  def _step_velocity(self, state: State, action: jax.Array) -> State:
+    fc, cfg, r = self.fleet_config, self._nav, self.fleet_config.robot
+    task = self._mjx_model.task
+    p = task.world
+    k = self.num_robots
+    model = self._mjx_model
+    info = dict(state.info)
+
+    bad = ~jnp.isfinite(action) | (jnp.abs(action) > 1.0)
+    a = jnp.clip(jnp.where(jnp.isfinite(action), action, 0.0), -1.0, 1.0).reshape(k, 2)
+    target = a * jnp.asarray([[r.max_speed, r.max_yaw_rate]], _F32)
+
+    data = state.data
+    qpos = data.qpos
+    # Playground's cached auto-reset swaps data, not info: restart the episode state then.
+    swapped = jnp.any(qpos != info["last_qpos"])
+    cmd = jnp.where(swapped, 0.0, info["cmd"])
+    speed = jax.tree.map(lambda fresh, old: jnp.where(swapped, fresh, old), SpeedState.create(k), info["speed"])
+    in_k = jnp.where(swapped, False, info["in_keepout"])
+    goal = info["goal"]
+    stations = p.nav.stations
+    dist0 = jax.vmap(lambda g, q: navigation.nav_value(p.nav, g, q))(goal, qpos[:, :2])
+
+    dt = fc.control_dt
+    step_acc = jnp.asarray([[r.max_accel * dt, r.max_yaw_accel * dt]], _F32)
+    tol = fc.speed_tolerance
+
+    def tick(carry, _):
+      data, cmd, speed, in_k, acc = carry
+      poses = data.qpos[:, :3]
+      speed, res = speed_filter(p.speed, poses, speed)
+      cap = planner.limit_to_speed(res.speed_limit, res.percentage, jnp.ones((k,), bool), r.max_speed)
+      ramped = cmd + jnp.clip(target - cmd, -step_acc, step_acc)
+      clipped = clip_command(ramped, cap, r, fc.limit_angular)
+      excess = jnp.sum(jnp.abs(ramped - clipped), axis=1) * dt
+      v, w = clipped[:, 0], clipped[:, 1]
+
+      def substep(c, _):
+        data, in_k, entries, collide, over = c
+        th = data.qpos[:, 2]
+        ctrl = jnp.stack([v * jnp.cos(th), v * jnp.sin(th), w], axis=1)
+        data = jax.vmap(lambda d, u: mjx_step(model, d, u))(data, ctrl)
+        xy = data.qpos[:, :2]
+        kin = keepout_cost_at(p.keepout, xy) >= constants.INSCRIBED_INFLATED_OBSTACLE
+        hit = _grid_value(task.static_inflated, p.map_origin, p.map_resolution, xy,
+                          constants.NO_INFORMATION) >= constants.INSCRIBED_INFLATED_OBSTACLE
+        spd = jnp.linalg.norm(data.qvel[:, :2], axis=-1)
+        over_limit = spd > _mps_cap(p, xy, r.max_speed) + tol
+        return (data, kin, entries + (kin & ~in_k), collide | hit,
+                over + over_limit.astype(_F32) * fc.physics_dt), None
+
+      zeros_b = jnp.zeros((k,), bool)
+      (data, in_k, entries, collide, over), _ = jax.lax.scan(
+          substep, (data, in_k, zeros_b.astype(jnp.int32), zeros_b, jnp.zeros((k,), _F32)), None,
+          length=fc.substeps_per_tick)
+      acc = jax.tree.map(jnp.add, acc, {"entries": entries, "collide": collide.astype(jnp.int32),
+                                        "over": over, "excess": excess})
+      return (data, clipped, speed, in_k, acc), cap
+
+    acc0 = {"entries": jnp.zeros((k,), jnp.int32), "collide": jnp.zeros((k,), jnp.int32),
+            "over": jnp.zeros((k,), _F32), "excess": jnp.zeros((k,), _F32)}
+    (data, cmd, speed, in_k, acc), caps = jax.lax.scan(tick, (data, cmd, speed, in_k, acc0), None,
+                                                       length=fc.ticks_per_step)
+    xy = data.qpos[:, :2]
+    dist1 = jax.vmap(lambda g, q: navigation.nav_value(p.nav, g, q))(goal, xy)
+    reach = 2.0 * r.max_speed * fc.step_seconds
+    progress = jnp.clip(dist0 - dist1, -reach, reach)
+    reached = jnp.linalg.norm(xy - stations[goal], axis=-1) < fc.planner.goal_tolerance
+    rng, k_goal = jax.random.split(info["rng"])
+    goal = jnp.where(reached, _sample_goal(k_goal, task.goal_logits, xy, goal, stations), goal)
+
+    c_end, s_end = jnp.cos(data.qpos[:, 2]), jnp.sin(data.qpos[:, 2])
+    ahead = jnp.asarray(AHEAD[:2], _F32)
+    motion = jnp.where(cmd[:, :1] < 0, -1.0, 1.0) * jnp.stack([c_end, s_end], axis=1)   # reversing too
+    ahead_pts = xy[:, None, :] + ahead[None, :, None] * motion[:, None, :]
+    ahead_cap = jnp.min(_mps_cap(p, ahead_pts, r.max_speed), axis=1)
+    approach = jnp.maximum(jnp.abs(cmd[:, 0]) - ahead_cap, 0.0) * fc.step_seconds
+    collided = acc["collide"] > 0
+    entered = acc["entries"] > 0
+    reward = jnp.sum(cfg.progress_weight * progress + cfg.goal_bonus * reached
+                     - cfg.keepout_penalty * acc["entries"] - cfg.collision_penalty * collided
+                     - cfg.speed_penalty * acc["over"] - cfg.clip_penalty * acc["excess"]
+                     - cfg.approach_penalty * approach - cfg.time_penalty)
+    done = jnp.any(collided) | (jnp.any(entered) if cfg.keepout == "terminate" else False)
+    info.update(rng=rng, goal=goal, cmd=cmd, speed=speed, cap=caps[-1], last_qpos=data.qpos, in_keepout=in_k)
+    metrics = dict(state.metrics)      # keys wrappers added (Brax's EvalWrapper adds "reward") stay
+    metrics.update({"progress": jnp.sum(progress), "goals_reached": jnp.sum(reached).astype(_F32),
+               "keepout_entries": jnp.sum(acc["entries"]).astype(_F32),
+               "collisions": jnp.sum(collided).astype(_F32), "speed_violation_s": jnp.sum(acc["over"]),
+               "clipped": jnp.sum(acc["excess"]), "bad_action": jnp.sum(bad).astype(_F32)})
+    obs = self._obs(task, data, info)
+    return state.replace(data=data, obs=obs, reward=reward.astype(_F32), done=done.astype(_F32),
+                         metrics=metrics, info=info)
+
+  def _step_navigation(self, state: State, action: jax.Array) -> State:
+    cfg = self._nav
+    task = self._mjx_model.task
+    fleet = self._fleet.with_params(task.world)
+    ws: WorldState = state.info["world"]
+    # A cached auto-reset restores data only: put it back into the world state.
+    ws = dataclasses.replace(ws, data=state.data)
+    s = self.num_stations
+    bad = (action < -1) | (action >= s)
+    ws = fleet.step(ws, jnp.where(bad, -1, action))
+    old, new = state.info["world"].metrics, ws.metrics
+    goals = jnp.sum(new.goals_reached - old.goals_reached)
+    entries = jnp.sum(new.keepout_entries - old.keepout_entries)
+    reward = cfg.goal_bonus * goals - cfg.keepout_penalty * entries - cfg.time_penalty
+    done = (entries > 0) if cfg.keepout == "terminate" else jnp.asarray(False)
+    zero = jnp.zeros((), _F32)
+    metrics = dict(state.metrics)
+    metrics.update({name: zero for name in self._metric_names()})
+    metrics.update(goals_reached=goals.astype(_F32), keepout_entries=entries.astype(_F32),
+                   bad_action=jnp.sum(bad).astype(_F32))
+    info = dict(state.info, world=ws)
+    return state.replace(data=ws.data, obs=self._nav_obs(task, ws), reward=reward.astype(_F32),
+                         done=done.astype(_F32), metrics=metrics, info=info)
+
+  # ------------------------------------------------------------------ observations
+
+  def _obs(self, task: NavTask, data: mjx.Data, info: dict) -> jax.Array:
+    """float32 [K * D] (see the module docstring)."""
+    r = self.fleet_config.robot
+    p = task.world
+    k = self.num_robots
+    pose = data.qpos[:, :3]
+    c, s = jnp.cos(pose[:, 2]), jnp.sin(pose[:, 2])
+    off = jnp.asarray(self._crop)                                          # [C2, 2]
+    wx, wy = _rotate(c[:, None], s[:, None], off[None, :, 0], off[None, :, 1])
+    pts = jnp.stack([wx + pose[:, :1], wy + pose[:, 1:2]], axis=-1)       # [K, C2, 2]
+    static = _grid_value(task.static_inflated, p.map_origin, p.map_resolution, pts, constants.NO_INFORMATION)
+    keep = keepout_cost_at(p.keepout, pts).astype(jnp.int32)
+    keep = jnp.where(keep == constants.NO_INFORMATION, 0, keep)
+    crop = jnp.maximum(static, keep).astype(_F32) / 255.0                # [K, C2]
+
+    cap = info["cap"]
+    limited = jnp.isfinite(cap)
+    cap_obs = jnp.stack([jnp.where(limited, jnp.minimum(cap / r.max_speed, 1.0), 1.0),
+                         limited.astype(_F32)], axis=1)
+    ahead = jnp.asarray(AHEAD, _F32)
+    ahead_pts = pose[:, None, :2] + ahead[None, :, None] * jnp.stack([c, s], axis=1)[:, None, :]
+    ahead_cap = _mps_cap(p, ahead_pts, r.max_speed)
+    ahead_obs = jnp.where(jnp.isfinite(ahead_cap), jnp.minimum(ahead_cap / r.max_speed, 1.0), 1.0)
+
+    goal_xy = p.nav.stations[info["goal"]]
+    d = goal_xy - pose[:, :2]
+    gx, gy = _rotate(c, -s, d[:, 0], d[:, 1])
+    gdist = jnp.linalg.norm(d, axis=-1)
+    goal_obs = jnp.stack([jnp.clip(gx / 5.0, -1, 1), jnp.clip(gy / 5.0, -1, 1),
+                          jnp.minimum(gdist / 10.0, 1.0)], axis=1)
+    desc = jax.vmap(lambda g, q: navigation.descent_direction(p.nav, g, q))(info["goal"], pose[:, :2])
+    dx, dy = _rotate(c, -s, desc[:, 0], desc[:, 1])
+    ndist = jax.vmap(lambda g, q: navigation.nav_value(p.nav, g, q))(info["goal"], pose[:, :2])
+    nav_obs = jnp.stack([dx, dy, jnp.minimum(ndist / 20.0, 1.0)], axis=1)
+
+    spd = jnp.linalg.norm(data.qvel[:, :2], axis=-1)
+    vel_obs = jnp.stack([info["cmd"][:, 0] / r.max_speed, info["cmd"][:, 1] / r.max_yaw_rate,
+                         spd / r.max_speed], axis=1)
+
+    rel = pose[None, :, :2] - pose[:, None, :2]                          # [K, K, 2] others - self
+    dd = jnp.where(jnp.eye(k, dtype=bool), jnp.inf, jnp.linalg.norm(rel, axis=-1))
+    j = jnp.argmin(dd, axis=1)
+    near = rel[jnp.arange(k), j]
+    ox, oy = _rotate(c, -s, near[:, 0], near[:, 1])
+    has = jnp.isfinite(jnp.min(dd, axis=1))
+    other_obs = jnp.stack([jnp.where(has, jnp.clip(ox / 3.0, -1, 1), 0.0),
+                           jnp.where(has, jnp.clip(oy / 3.0, -1, 1), 0.0),
+                           jnp.where(has, jnp.minimum(jnp.min(dd, axis=1) / 3.0, 1.0), 1.0)], axis=1)
+    per_robot = jnp.concatenate([crop, cap_obs, ahead_obs, goal_obs, nav_obs, vel_obs, other_obs], axis=1)
+    return per_robot.reshape(-1).astype(_F32)
+
+  def _nav_obs(self, task: NavTask, ws: WorldState) -> jax.Array:
+    """Navigation mode: per robot (x, y, cos, sin, goal x, goal y, cap, speed), then every station (x, y)."""
+    r = self.fleet_config.robot
+    p = task.world
+    pose = ws.data.qpos[:, :3]
+    scale = 10.0
+    cap = ws.speed_cap
+    per = jnp.stack([pose[:, 0] / scale, pose[:, 1] / scale, jnp.cos(pose[:, 2]), jnp.sin(pose[:, 2]),
+                     p.nav.stations[ws.goal, 0] / scale, p.nav.stations[ws.goal, 1] / scale,
+                     jnp.where(jnp.isfinite(cap), jnp.minimum(cap / r.max_speed, 1.0), 1.0),
+                     jnp.linalg.norm(ws.data.qvel[:, :2], axis=-1) / r.max_speed], axis=1)
+    return jnp.concatenate([per.reshape(-1), p.nav.stations.reshape(-1) / scale]).astype(_F32)
+
+
+# ----------------------------------------------------------------------------- randomisation
+
+
+def randomize_zones_and_goals(model: NavModel, rng: jax.Array, *, limit_scale: tuple[float, float] = (0.6, 1.0),
+                              zone_shift: float = 0.5, goal_keep: float = 0.5) -> tuple[NavModel, Any]:
+  """Playground/Brax `randomization_fn`: per-env speed zones and goal stations.
+
+  For env i: the speed mask's base and multiplier are scaled by
+  u_i ~ U(limit_scale) (every zone's limit scales by u_i; "no limit" cells stay
+  unlimited), the mask's origin moves by U(-zone_shift, zone_shift) m in x and
+  y (the zones move; the planner's per-cell cap moves with them), and each goal
+  station stays in the goal distribution with probability goal_keep (at least
+  two always do).
+
+  Args:
+    model: the env's NavModel (`env.mjx_model`).
+    rng: uint32 [N, 2], one key per env (Brax's PPO passes `rng=`).
+    limit_scale: (low, high) with 0 < low <= high <= 1 (a scale above 1 could
+      lift a percent limit over 100, which Nav2 turns into "no limit").
+    zone_shift: m, >= 0.
+    goal_keep: probability in (0, 1].
+
+  Returns:
+    (NavModel with leading axis N on the randomised leaves, in_axes pytree).
+
+  Raises:
+    ValueError: bad ranges or rng shape.
+  """
+  lo, hi = (float(v) for v in limit_scale)
+  if not 0 < lo <= hi <= 1:
+    raise ValueError(f"limit_scale must satisfy 0 < low <= high <= 1; got {limit_scale!r}")
+  if not np.isfinite(zone_shift) or zone_shift < 0:
+    raise ValueError(f"zone_shift must be a finite number >= 0 (m); got {zone_shift!r}")
+  if not 0 < goal_keep <= 1:
+    raise ValueError(f"goal_keep must lie in (0, 1]; got {goal_keep!r}")
+  rng = jnp.asarray(rng)
+  if rng.ndim != 2 or rng.shape[1] != 2:
+    raise ValueError(f"rng must be uint32 [N, 2], one key per env; got shape {tuple(rng.shape)}")
+  task = model.task
+  speed = task.world.speed
+  s = task.goal_logits.shape[0]
+
+  def one(key):
+    k_scale, k_shift, k_keep, k_perm = jax.random.split(key, 4)
+    u = jax.random.uniform(k_scale, (), _F32, lo, hi)
+    shift = jax.random.uniform(k_shift, (2,), _F32, -zone_shift, zone_shift)
+    keep = jax.random.bernoulli(k_keep, goal_keep, (s,))
+    first_two = jnp.zeros((s,), bool).at[jax.random.permutation(k_perm, s)[:2]].set(True)
+    logits = jnp.where(keep | first_two, 0.0, -jnp.inf).astype(_F32)
+    info = dataclasses.replace(speed.info, base=speed.info.base * u, multiplier=speed.info.multiplier * u)
+    return (info, speed.origin + shift[None, :], task.world.speed_cap * u, task.world.zone_speed * u, logits)
+
+  info, origin, cap, zone_speed, logits = jax.vmap(one)(rng)
+  v_model = model.tree_replace({
+      "task.world": dataclasses.replace(
+          task.world, speed=dataclasses.replace(speed, info=info, origin=origin), speed_cap=cap,
+          zone_speed=zone_speed),
+      "task.goal_logits": logits})
+  in_axes = jax.tree.map(lambda _: None, model)
+  world_axes = jax.tree.map(lambda _: None, task.world)
+  speed_axes = dataclasses.replace(world_axes.speed, info=jax.tree.map(lambda _: 0, speed.info), origin=0)
+  in_axes = in_axes.tree_replace({
+      "task.world": dataclasses.replace(world_axes, speed=speed_axes, speed_cap=0, zone_speed=0),
+      "task.goal_logits": 0})
+  return v_model, in_axes
+
+
+__all__ = ["AHEAD", "KEEPOUT_MODES", "MODES", "NavEnv", "NavEnvConfig", "NavModel", "NavTask", "State",
+           "clip_command", "nav_model", "randomize_zones_and_goals"]

@@ -1,0 +1,366 @@
+"""PPO on the fleet RL env (`sims.rl.NavEnv`) with rejax's PPO, and its learning curve.
+
+    python -m sims.train_ppo --timesteps 400000 --out out/ppo        # needs the `rl` extra
+
+The trainer is rejax 0.1.3 (`rejax.PPO`, maintained, pure JAX: rollouts,
+GAE and updates are one jitted `lax.scan`), chosen because it runs on the
+pinned jax 0.10.2. Brax 0.14.2's PPO trainer (the newest release) stops on jax
+0.10 with `AttributeError: jax.device_put_replicated is deprecated` (removed in
+jax 0.10; brax/training/agents/ppo/train.py:756); on jax 0.9.2 it trains this
+env unchanged (`ppo.train(environment=NavEnv.create(), wrap_env_fn=
+wrapper.wrap_for_brax_training)`). rejax speaks gymnax's env API (its 5-value
+`step`; gymnax 1.0's own `Environment.step` returns 6, so the adapter does not
+subclass it), so `GymnaxAdapter` puts a Playground-contract env behind it:
+Brax's `EpisodeWrapper` (time limit) inside, auto-reset outside (to the
+episode's first state, or a fresh `reset`), and optionally a Playground
+`randomization_fn` drawn per episode.
+
+Measured on the 2-core CPU (examples/ppo_nav/): 3.1 M env steps in 356 s
+(8.7 k env steps/s, 64 envs); success (a goal reached in a 60 s episode) from
+0 % to ~80 % (mean of the last 10 evaluations), 0 keepout entries, 0
+collisions, ~0.04 s per episode above a zone's limit (one zone entry at speed,
+clipped at the next 20 Hz controller tick).
+
+Evaluation (`evaluate_policy`) runs the policy's mean action (no sampling
+noise) on `num_eval` envs for one episode each and reports, per episode:
+return, success (a goal reached before the episode ended), goals reached,
+keepout entries, collisions, seconds above a speed limit, and the command the
+speed filter had to clip. `main` writes OUT/learning_curve.png and
+OUT/results.json.
+"""
+
+import argparse
+import json
+import sys
+import time
+from pathlib import Path
+from typing import Any, Callable
+
+from sims import xla_flags
+
+xla_flags.use_fast_cpu_compile()   # before the JAX backend starts (see sims/xla_flags.py)
+
+import jax  # noqa: E402
+import jax.numpy as jnp
+import numpy as np
+
+from brax.envs.wrappers.training import EpisodeWrapper
+from flax import struct
+from gymnax.environments import spaces
+import rejax
+
+from sims.rl import NavEnv, NavEnvConfig
+
+_F32 = jnp.float32
+
+
+@struct.dataclass
+class AdapterParams:
+  """gymnax env params: only the time limit rejax reads (`max_steps_in_episode`)."""
+  max_steps_in_episode: int = struct.field(pytree_node=False, default=200)
+
+
+@struct.dataclass
+class AdapterState:
+  """One env's state behind the adapter.
+
+  Attributes:
+    env_state: the Playground State (inside Brax's EpisodeWrapper).
+    first: the State the episode started from (restored on done unless full_reset).
+    model_leaves: the randomised model leaves of this env ([] without a randomization_fn).
+  """
+  env_state: Any
+  first: Any
+  model_leaves: Any
+
+
+class GymnaxAdapter:
+  """A Playground `MjxEnv` behind gymnax's API (what rejax's algorithms call).
+
+  `reset(key, params) -> (obs, state)`, `step(key, state, action, params) ->
+  (obs, state, reward, done, info)` with auto-reset on done (terminal or time
+  limit), `action_space`, `observation_space`. Auto-reset restores the
+  episode's first state (Playground's default, `full_reset=False`; cheap) or
+  calls `reset` with a fresh key (`full_reset=True`: new spawn, goal and
+  randomised model every episode). With `randomization_fn` (Playground's
+  `fn(model, rng=[N, 2]) -> (model_v, in_axes)`) each env draws its own model
+  at reset and only the randomised leaves are carried in its state; the model
+  is swapped in the way Playground's `BraxDomainRandomizationVmapWrapper` does.
+  """
+
+  def __init__(self, env: NavEnv, episode_length: int,
+               randomization_fn: Callable | None = None, *, full_reset: bool = False):
+    if isinstance(episode_length, bool) or int(episode_length) != episode_length or episode_length < 1:
+      raise ValueError(f"episode_length must be an integer >= 1; got {episode_length!r}")
+    self.env = env
+    self.wrapped = EpisodeWrapper(env, int(episode_length), 1)
+    self.episode_length = int(episode_length)
+    self.randomization_fn = randomization_fn
+    self.full_reset = bool(full_reset)
+
+  @property
+  def default_params(self) -> AdapterParams:
+    return AdapterParams(max_steps_in_episode=self.episode_length)
+
+  def _leaves(self, key):
+    """The randomised leaves of one env's model (list; empty without a randomization_fn)."""
+    if self.randomization_fn is None:
+      return []
+    base = self.env.unwrapped._mjx_model
+    model_v, in_axes = self.randomization_fn(base, rng=key[None])
+    axes = jax.tree.leaves(in_axes, is_leaf=lambda x: x is None)
+    leaves = jax.tree.leaves(model_v)
+    return [jnp.take(x, 0, axis=ax) for x, ax in zip(leaves, axes) if ax is not None]
+
+  def _model(self, model_leaves):
+    base = self.env.unwrapped._mjx_model
+    if self.randomization_fn is None:
+      return base
+    _, in_axes = self.randomization_fn(base, rng=jnp.zeros((1, 2), jnp.uint32))
+    axes = jax.tree.leaves(in_axes, is_leaf=lambda x: x is None)
+    leaves, treedef = jax.tree.flatten(base)
+    it = iter(model_leaves)
+    return jax.tree.unflatten(treedef, [x if ax is None else next(it) for x, ax in zip(leaves, axes)])
+
+  def _with_model(self, model_leaves, fn):
+    env = self.env.unwrapped
+    old = env._mjx_model
+    env._mjx_model = self._model(model_leaves)
+    try:
+      return fn()
+    finally:
+      env._mjx_model = old
+
+  def reset(self, key, params=None):
+    del params
+    k_model, k_env = jax.random.split(key)
+    leaves = self._leaves(k_model)
+    st = self._with_model(leaves, lambda: self.wrapped.reset(k_env))
+    return st.obs, AdapterState(st, None if self.full_reset else st, leaves)
+
+  def step(self, key, state: AdapterState, action, params=None):
+    st = self._with_model(state.model_leaves, lambda: self.wrapped.step(state.env_state, action))
+    done = st.done > 0
+    info = {"metrics": st.metrics, "truncation": st.info["truncation"]}
+    if self.full_reset:
+      _, restart = self.reset(key)
+    else:
+      restart = AdapterState(state.first, state.first, state.model_leaves)
+    new = jax.tree.map(lambda a, b: jnp.where(done, a, b), restart,
+                       AdapterState(st, state.first, state.model_leaves))
+    return new.env_state.obs, new, st.reward, done, info
+
+  def action_space(self, params=None):
+    return spaces.Box(low=-1.0, high=1.0, shape=(self.env.action_size,))
+
+  def observation_space(self, params=None):
+    return spaces.Box(low=-jnp.inf, high=jnp.inf, shape=(self.env.observation_size,))
+
+  @property
+  def num_actions(self) -> int:
+    return self.env.action_size
+
+  @property
+  def name(self) -> str:
+    return type(self.env.unwrapped).__name__
+
+
+EVAL_KEYS = ("return", "success", "goals_reached", "keepout_entries", "collisions",
+             "speed_violation_s", "clipped", "length")
+
+
+def evaluate_policy(adapter: GymnaxAdapter, act: Callable, key: jax.Array, num_eval: int) -> dict:
+  """One episode on each of `num_eval` envs with `act(obs) -> action` (jittable).
+
+  Returns:
+    dict of float32 [num_eval] per episode: see EVAL_KEYS (success = at least
+    one goal reached before the episode ended).
+  """
+  def one(k):
+    k_model, k_reset = jax.random.split(k)
+    model = adapter._leaves(k_model)
+    st = adapter._with_model(model, lambda: adapter.wrapped.reset(k_reset))
+
+    def body(carry, _):
+      st, alive, acc = carry
+      nst = adapter._with_model(model, lambda: adapter.wrapped.step(st, act(st.obs)))
+      m = nst.metrics
+      add = {"return": nst.reward, "goals_reached": m["goals_reached"], "keepout_entries": m["keepout_entries"],
+             "collisions": m["collisions"], "speed_violation_s": m["speed_violation_s"],
+             "clipped": m["clipped"], "length": jnp.ones((), _F32)}
+      acc = {n: acc[n] + jnp.where(alive, add[n], 0.0) for n in acc}
+      return (nst, alive & (nst.done == 0), acc), None
+
+    acc0 = {n: jnp.zeros((), _F32) for n in EVAL_KEYS if n != "success"}
+    (_, _, acc), _ = jax.lax.scan(body, (st, jnp.asarray(True), acc0), None, length=adapter.episode_length)
+    acc["success"] = (acc["goals_reached"] > 0).astype(_F32)
+    return acc
+
+  return jax.vmap(one)(jax.random.split(key, num_eval))
+
+
+def make_ppo(adapter: GymnaxAdapter, *, timesteps_per_call: int, num_envs: int = 32, num_steps: int = 64,
+             num_epochs: int = 4, num_minibatches: int = 8, learning_rate: float = 3e-4,
+             hidden=(64, 64), ent_coef: float = 0.0, gamma: float = 0.99) -> "rejax.PPO":
+  """rejax.PPO on the adapter; each `algo.train(train_state=ts)` call trains `timesteps_per_call` steps.
+
+  rejax's own evaluation (which would compile the env step a second and third
+  time inside the training program) is switched off; `train_with_curve`
+  evaluates between calls with `evaluate_policy`, compiled once.
+  """
+  per_iter = num_envs * num_steps
+  if timesteps_per_call % per_iter:
+    raise ValueError(f"timesteps_per_call ({timesteps_per_call}) must be a multiple of num_envs * num_steps "
+                     f"({per_iter})")
+  algo = rejax.PPO.create(
+      env=adapter, env_params=adapter.default_params, total_timesteps=int(timesteps_per_call),
+      num_envs=num_envs, num_steps=num_steps, num_epochs=num_epochs, num_minibatches=num_minibatches,
+      learning_rate=learning_rate, gamma=gamma, gae_lambda=0.95, clip_eps=0.2, ent_coef=ent_coef,
+      vf_coef=0.5, max_grad_norm=0.5, normalize_observations=True, normalize_rewards=False,
+      eval_freq=int(timesteps_per_call), skip_initial_evaluation=True,
+      agent_kwargs={"hidden_layer_sizes": tuple(hidden), "activation": "tanh"})
+  return algo.replace(eval_callback=lambda algo, ts, rng: jnp.zeros((), _F32))
+
+
+def mean_policy(algo, ts) -> Callable:
+  """The policy's mean action (deterministic), with rejax's observation normalisation."""
+  def act(obs):
+    if algo.normalize_observations:
+      obs = algo.normalize_obs(ts.obs_rms_state, obs)
+    mean = algo.actor.apply(ts.actor_ts.params, obs[None], method="_action_dist").mean()[0]
+    return jnp.clip(mean, -1.0, 1.0)
+  return act
+
+
+def train_with_curve(adapter: GymnaxAdapter, algo, key: jax.Array, *, num_calls: int, num_eval: int):
+  """Trains `num_calls` x `algo.total_timesteps` env steps, evaluating before and after each call.
+
+  Returns:
+    (final train state, evals: dict name -> float list [num_calls + 1], timing dict).
+  """
+  with jax.numpy_rank_promotion("allow"):     # rejax broadcasts [N, D] - [D] internally
+    return _train_with_curve(adapter, algo, key, num_calls=num_calls, num_eval=num_eval)
+
+
+def _train_with_curve(adapter, algo, key, *, num_calls, num_eval):
+  k_init, k_eval = jax.random.split(key)
+  train = jax.jit(lambda ts: algo.train(train_state=ts)[0])
+  evaluate = jax.jit(lambda ts, k: {n: jnp.mean(v) for n, v in
+                                    evaluate_policy(adapter, mean_policy(algo, ts), k, num_eval).items()})
+  ts = jax.jit(algo.init_state)(k_init)
+  t0 = time.perf_counter()
+  train_c = train.lower(ts).compile()
+  t1 = time.perf_counter()
+  eval_c = evaluate.lower(ts, k_eval).compile()
+  t2 = time.perf_counter()
+  evals = {n: [] for n in (*EVAL_KEYS, "env_steps")}
+  train_s = 0.0
+
+  def record(ts, i):
+    out = eval_c(ts, jax.random.fold_in(k_eval, i))
+    for n, v in out.items():
+      evals[n].append(float(v))
+    evals["env_steps"].append(float(ts.global_step))
+
+  record(ts, 0)
+  for i in range(num_calls):
+    t = time.perf_counter()
+    ts = train_c(ts)
+    jax.block_until_ready(ts)
+    train_s += time.perf_counter() - t
+    record(ts, i + 1)
+  timing = {"compile_train_s": t1 - t0, "compile_eval_s": t2 - t1, "train_s": train_s}
+  return ts, evals, timing
+
+
+def plot_curve(evals: dict, path: Path, title: str) -> Path:
+  """Learning curve PNG: return, success rate and rule breaks against env steps."""
+  import matplotlib
+  matplotlib.use("Agg")
+  import matplotlib.pyplot as plt
+
+  x = np.asarray(evals["env_steps"]) / 1e3
+  fig, axes = plt.subplots(1, 3, figsize=(12, 3.4), dpi=90)
+  axes[0].plot(x, evals["return"], color="tab:blue")
+  axes[0].set_ylabel("episode return")
+  axes[1].plot(x, 100 * np.asarray(evals["success"]), color="tab:green", label="success (%)")
+  axes[1].set_ylabel("episodes reaching a goal (%)")
+  axes[1].set_ylim(0, 100)
+  twin = axes[1].twinx()
+  twin.plot(x, evals["goals_reached"], color="tab:olive", linestyle="--", label="goals / episode")
+  twin.set_ylabel("goals per episode", color="tab:olive")
+  twin.set_ylim(0, max(1.0, 1.1 * max(evals["goals_reached"])))
+  axes[1].legend(handles=axes[1].get_lines() + twin.get_lines(), fontsize=8, loc="upper left")
+  axes[2].plot(x, evals["keepout_entries"], color="tab:red", label="keepout entries")
+  axes[2].plot(x, evals["collisions"], color="tab:gray", label="collisions")
+  axes[2].plot(x, evals["speed_violation_s"], color="tab:orange", label="s above speed limit")
+  axes[2].plot(x, evals["clipped"], color="tab:purple", linestyle=":", label="clipped command (m)")
+  axes[2].set_ylabel("per episode")
+  top = max(max(evals[k]) for k in ("keepout_entries", "collisions", "speed_violation_s", "clipped"))
+  axes[2].set_ylim(0, 1.45 * max(top, 0.1))
+  axes[2].legend(fontsize=7, loc="upper left", ncol=2)
+  for ax in axes:
+    ax.set_xlabel("env steps (thousands)")
+    ax.grid(alpha=0.3)
+  fig.suptitle(title, fontsize=10)
+  fig.tight_layout()
+  path.parent.mkdir(parents=True, exist_ok=True)
+  fig.savefig(path)
+  plt.close(fig)
+  return path
+
+
+def main(argv=None) -> int:
+  ap = argparse.ArgumentParser(prog="python -m sims.train_ppo",
+                               description="Train PPO (rejax) on the fleet RL env and plot its learning curve.")
+  ap.add_argument("--timesteps", type=int, default=400_000, help="env steps to train (default 400k)")
+  ap.add_argument("--num-envs", type=int, default=32, help="parallel envs (default 32)")
+  ap.add_argument("--num-steps", type=int, default=64, help="rollout length per update (default 64)")
+  ap.add_argument("--episode-length", type=int, default=150, help="env steps of 0.2 s per episode (default 150)")
+  ap.add_argument("--evals", type=int, default=20, help="evaluation points on the curve (default 20)")
+  ap.add_argument("--num-eval", type=int, default=32, help="episodes per evaluation (default 32)")
+  ap.add_argument("--keepout", choices=("terminate", "penalty"), default="terminate")
+  ap.add_argument("--randomize", action="store_true", help="randomise zones and goals per episode")
+  ap.add_argument("--seed", type=int, default=0)
+  ap.add_argument("--out", type=Path, default=Path("out/ppo"))
+  args = ap.parse_args(argv)
+  for name in ("timesteps", "num_envs", "num_steps", "episode_length", "evals", "num_eval"):
+    if getattr(args, name) < 1:
+      ap.error(f"--{name.replace('_', '-')} must be >= 1; got {getattr(args, name)}")
+
+  from sims.rl import randomize_zones_and_goals
+  env = NavEnv.create(config=NavEnvConfig(keepout=args.keepout))
+  adapter = GymnaxAdapter(env, args.episode_length, randomize_zones_and_goals if args.randomize else None)
+  per_iter = args.num_envs * args.num_steps
+  iters = max(1, -(-args.timesteps // per_iter))
+  per_call = max(1, iters // args.evals)
+  num_calls = -(-iters // per_call)
+  algo = make_ppo(adapter, timesteps_per_call=per_call * per_iter, num_envs=args.num_envs,
+                  num_steps=args.num_steps)
+  steps = num_calls * per_call * per_iter
+  device = jax.devices()[0].device_kind
+  print(f"PPO (rejax 0.1.3) on NavEnv: {steps} env steps, {args.num_envs} envs, device {device}",
+        file=sys.stderr)
+  _, evals, timing = train_with_curve(adapter, algo, jax.random.PRNGKey(args.seed), num_calls=num_calls,
+                                      num_eval=args.num_eval)
+  result = {"trainer": "rejax.PPO 0.1.3", "jax": jax.__version__, "device": device, "env_steps": steps,
+            **timing, "env_steps_per_s": steps / timing["train_s"],
+            "config": {k: (str(v) if isinstance(v, Path) else v) for k, v in vars(args).items()},
+            "curve": evals, "final": {k: v[-1] for k, v in evals.items()},
+            "initial": {k: v[0] for k, v in evals.items()}}
+  args.out.mkdir(parents=True, exist_ok=True)
+  (args.out / "results.json").write_text(json.dumps(result, indent=2))
+  png = plot_curve(evals, args.out / "learning_curve.png",
+                   f"PPO (rejax) on NavEnv, {device}: {steps / 1e3:.0f}k env steps in "
+                   f"{timing['train_s']:.0f} s")
+  print(f"compile {timing['compile_train_s']:.1f} s (train) + {timing['compile_eval_s']:.1f} s (eval), "
+        f"train {timing['train_s']:.1f} s ({steps / timing['train_s']:.0f} env steps/s)")
+  f, i = result["final"], result["initial"]
+  for name in EVAL_KEYS:
+    print(f"  {name:<18} start {i[name]:8.3f}   end {f[name]:8.3f}")
+  print(f"wrote {args.out / 'results.json'}, {png}")
+  return 0
+
+
+if __name__ == "__main__":
+  sys.exit(main())

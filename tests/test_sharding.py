@@ -1,0 +1,199 @@
+"""sims/sharding.py: sharded rollouts equal unsharded ones; `jaxfilters fleet --devices`; two processes.
+
+The test process has already started JAX with one CPU device, so every check
+runs in a fresh subprocess with XLA_FLAGS=--xla_force_host_platform_device_count
+(8 devices for one process; 2 x 2 devices for the jax.distributed run).
+Integer outputs (goals, goal counts, keepout entries, stuck events, the
+recorded goals of every step) must be equal exactly.
+"""
+
+import json
+import os
+import socket
+import subprocess
+import sys
+import textwrap
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+ROOT = Path(__file__).resolve().parents[1]
+WORLDS, STEPS, K = 8, 4, 2
+
+
+def _env(devices: int) -> dict:
+  env = dict(os.environ)
+  env["XLA_FLAGS"] = (env.get("XLA_FLAGS", "") + f" --xla_force_host_platform_device_count={devices}").strip()
+  env["JAX_PLATFORMS"] = "cpu"
+  env["PYTHONPATH"] = str(ROOT) + os.pathsep + env.get("PYTHONPATH", "")
+  return env
+
+
+def _run(code: str, devices: int, timeout: float = 900) -> subprocess.CompletedProcess:
+  return subprocess.run([sys.executable, "-c", textwrap.dedent(code)], env=_env(devices), cwd=ROOT,
+                        capture_output=True, text=True, timeout=timeout)
+
+
+SINGLE = f"""
+from sims import xla_flags
+xla_flags.use_fast_cpu_compile()
+import json, sys
+import jax, jax.numpy as jnp, numpy as np
+from sims import sharding
+from sims.config import FleetConfig
+from sims.env import FleetEnv
+
+assert len(jax.devices()) == 8, jax.devices()
+out = {{}}
+env = FleetEnv.create(config=FleetConfig(robots_per_world={K}))
+keys = env.world_keys(jax.random.PRNGKey(0), {WORLDS})
+plain = env.rollout_fn({STEPS})(env.params, env.reset_fn()(env.params, keys))
+ref = {{k: np.asarray(v) for k, v in sharding.integer_outputs(*plain).items()}}
+np.savez(sys.argv[1] if len(sys.argv) > 1 else "ref.npz", **ref)
+
+mesh = sharding.make_mesh(8)
+s0 = env.reset_fn(mesh=mesh)(sharding.put_global(env.params, sharding.replicated(mesh)),
+                              sharding.put_global(keys, sharding.worlds_sharding(mesh)))
+states, frames = env.rollout_fn({STEPS}, mesh=mesh)(env.params, s0)
+got = sharding.integer_outputs(states, frames)
+out["equal"] = {{k: bool(np.array_equal(np.asarray(v), ref[k])) for k, v in got.items()}}
+out["pose_max_diff"] = float(np.max(np.abs(np.asarray(frames.pose) - np.asarray(plain[1].pose))))
+out["state_devices"] = len(states.goal.sharding.device_set)
+out["state_spec"] = list(states.goal.sharding.spec)
+out["frame_spec"] = list(frames.goal.sharding.spec)
+out["shard_shape"] = list(states.goal.addressable_shards[0].data.shape)
+out["nonzero_goals"] = int(ref["goals_reached"].sum() + (ref["frame_goal"] != ref["frame_goal"][:1]).sum())
+
+# The RL env: reset and 3 steps of vmap(step), sharded over 4 devices vs unsharded.
+from sims.rl import NavEnv
+rl = NavEnv.create()
+rkeys = jax.random.split(jax.random.PRNGKey(1), 8)
+acts = jnp.tile(jnp.asarray([[1.0, 0.3]]), (8, 1))
+res = {{}}
+for name, devices in (("plain", None), ("sharded", 4)):
+  reset, step = sharding.rl_batch_fns(rl, devices=devices)
+  s = start = reset(rkeys)
+  for _ in range(3):
+    s = step(s, acts)
+  res[name] = s
+out["rl_devices"] = len(res["sharded"].obs.sharding.device_set)
+out["rl_goal_equal"] = bool(np.array_equal(np.asarray(res["plain"].info["goal"]), np.asarray(res["sharded"].info["goal"])))
+out["rl_done_equal"] = bool(np.array_equal(np.asarray(res["plain"].done), np.asarray(res["sharded"].done)))
+out["rl_obs_max_diff"] = float(np.max(np.abs(np.asarray(res["plain"].obs) - np.asarray(res["sharded"].obs))))
+out["rl_moved"] = float(np.min(np.linalg.norm(np.asarray(s.data.qpos[:, 0, :2])
+                                              - np.asarray(start.data.qpos[:, 0, :2]), axis=-1)))
+
+# Mesh errors.
+errs = []
+for bad in (0, 9, "most"):
+  try:
+    sharding.make_mesh(bad)
+  except ValueError as e:
+    errs.append(str(e))
+try:
+  sharding.check_divisible(6, sharding.make_mesh(4))
+except ValueError as e:
+  errs.append(str(e))
+out["errors"] = errs
+print("RESULT " + json.dumps(out))
+"""
+
+
+@pytest.fixture(scope="module")
+def single(tmp_path_factory):
+  ref = tmp_path_factory.mktemp("shard") / "ref.npz"
+  r = _run(SINGLE.replace('sys.argv[1] if len(sys.argv) > 1 else "ref.npz"', repr(str(ref))), devices=8)
+  assert r.returncode == 0, r.stderr[-3000:]
+  line = [l for l in r.stdout.splitlines() if l.startswith("RESULT ")][-1]
+  return json.loads(line[len("RESULT "):]), ref
+
+
+def test_sharded_fleet_rollout_equals_unsharded(single):
+  out, _ = single
+  assert out["equal"] == {k: True for k in ("goal", "goals_reached", "keepout_entries", "stuck_events",
+                                            "frame_goal")}
+  assert out["state_devices"] == 8 and out["shard_shape"] == [WORLDS // 8, K]
+  assert out["state_spec"] == ["worlds"]
+  assert out["frame_spec"] == [None, "worlds"]
+  assert out["pose_max_diff"] < 1e-5          # same program per world; floats agree too
+
+
+def test_sharded_rl_env_equals_unsharded(single):
+  out, _ = single
+  assert out["rl_devices"] == 4
+  assert out["rl_goal_equal"] and out["rl_done_equal"]
+  assert out["rl_obs_max_diff"] < 1e-5
+  assert out["rl_moved"] > 0.05                # the robots really drove (0.6 s at up to 0.5 m/s)
+
+
+def test_mesh_errors_name_expected_and_got(single):
+  out, _ = single
+  e = out["errors"]
+  assert "between 1 and the 8 available" in e[0] and "got 0" in e[0]
+  assert "got 9" in e[1]
+  assert "'all', an int or a list" in e[2]
+  assert "worlds (6) must be a multiple of the number of devices (4)" in e[3]
+
+
+def test_cli_devices(tmp_path):
+  code = """
+  import json, sys
+  from jaxfilters import cli
+  codes = []
+  for argv in (["fleet", "--devices", "3", "--robots", "8", "--robots-per-world", "2", "--steps", "1"],
+               ["fleet", "--devices", "9", "--robots", "8", "--robots-per-world", "2", "--steps", "1"],
+               ["fleet", "--devices", "two", "--robots", "8", "--steps", "1"]):
+    codes.append(cli.main(argv))
+  codes.append(cli.main(["fleet", "--devices", "all", "--robots", "8", "--robots-per-world", "1", "--steps", "1",
+                         "--out", sys.argv[1], "--no-cache", "--record-robots", "2"]))
+  print("CODES " + json.dumps(codes))
+  """
+  out = tmp_path / "fleet"
+  r = subprocess.run([sys.executable, "-c", textwrap.dedent(code), str(out)], env=_env(4), cwd=ROOT,
+                     capture_output=True, text=True, timeout=900)
+  assert r.returncode == 0, r.stderr[-3000:]
+  codes = json.loads([l for l in r.stdout.splitlines() if l.startswith("CODES ")][-1][6:])
+  assert codes == [2, 2, 2, 0], r.stderr[-3000:]
+  assert "worlds (4) must be a multiple of the number of devices (3)" in r.stderr
+  assert "between 1 and the 4 available" in r.stderr and "got 9" in r.stderr
+  assert "--devices must be a positive integer or 'all'; got 'two'" in r.stderr
+  summary = json.loads((out / "summary.json").read_text())
+  assert summary["config"]["devices"] == 4 and summary["config"]["worlds"] == 8
+
+
+def _free_port() -> int:
+  with socket.socket() as s:
+    s.bind(("127.0.0.1", 0))
+    return s.getsockname()[1]
+
+
+def test_two_processes_jax_distributed(single, tmp_path):
+  _, ref_path = single
+  port = _free_port()
+  procs = []
+  for i in range(2):
+    cmd = [sys.executable, "-m", "sims.sharding", "--coordinator", f"127.0.0.1:{port}", "--num-processes", "2",
+           "--process-id", str(i), "--worlds", str(WORLDS), "--steps", str(STEPS), "--robots-per-world", str(K),
+           "--out", str(tmp_path / f"p{i}.npz")]
+    procs.append(subprocess.Popen(cmd, env=_env(2), cwd=ROOT, stdout=subprocess.PIPE, stderr=subprocess.PIPE,
+                                  text=True))
+  outs = []
+  try:
+    for p in procs:
+      outs.append(p.communicate(timeout=900))
+  finally:
+    for p in procs:
+      if p.poll() is None:
+        p.kill()
+  for p, (so, se) in zip(procs, outs):
+    assert p.returncode == 0, se[-3000:]
+  ref = np.load(ref_path)
+  parts = [np.load(tmp_path / f"p{i}.npz") for i in range(2)]
+  seen = sorted(set(parts[0]["goal_index"].tolist()) | set(parts[1]["goal_index"].tolist()))
+  assert seen == list(range(WORLDS))
+  assert not set(parts[0]["goal_index"].tolist()) & set(parts[1]["goal_index"].tolist())  # split, not copied
+  for name in ("goal", "goals_reached", "keepout_entries", "stuck_events", "frame_goal"):
+    axis = ref[name].ndim - 2
+    for part in parts:
+      np.testing.assert_array_equal(part[name], ref[name].take(part[f"{name}_index"], axis=axis), err_msg=name)
