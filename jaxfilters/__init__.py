@@ -15,6 +15,10 @@ from jaxfilters.keepout import (KeepoutConfig, KeepoutState, keepout_filter, kee
                                 occ_to_cost)
 from jaxfilters.map_io import load_map, load_map_image, save_map
 from jaxfilters.pipeline import LayersConfig, costmap_pipeline
+from jaxfilters.shapes import (OVERLAY_MAX, OVERLAY_MIN, OVERLAY_SEQ, Circle, Polygon, RasterResult, Shapes,
+                               rasterize, rasterize_mask)
+from jaxfilters.soft import (signed_distance, soft_keepout_cost, soft_speed_limit,
+                             zone_speed_limits)
 from jaxfilters.speed import (LookaheadConfig, SpeedResult, SpeedState, speed_filter,
                               speed_filter_lookahead)
 from jaxfilters.static_layer import StaticLayerConfig, static_layer
@@ -22,11 +26,13 @@ from jaxfilters.types import Costmap, FilterInfo, FilterMask
 from jaxfilters.zone import ZoneResult, ZoneState, ZoneTable, zone_filter
 
 __all__ = [
-    "__version__", "BinaryResult", "BinaryState", "Costmap", "FilterInfo", "FilterMask", "InflationConfig",
-    "KeepoutConfig", "KeepoutState", "LayersConfig", "LookaheadConfig", "OccupancyGrid",
+    "__version__", "BinaryResult", "BinaryState", "Circle", "Costmap", "FilterInfo", "FilterMask",
+    "InflationConfig", "KeepoutConfig", "KeepoutState", "LayersConfig", "LookaheadConfig",
+    "OVERLAY_MAX", "OVERLAY_MIN", "OVERLAY_SEQ", "OccupancyGrid", "Polygon", "RasterResult", "Shapes",
     "SpeedResult", "SpeedState", "StaticLayerConfig", "ZoneResult", "ZoneState", "ZoneTable",
     "binary_filter", "constants", "costmap_pipeline", "footprint_radii", "inflate",
     "keepout_filter", "keepout_update_bounds", "load_map", "load_map_image", "occ_to_cost",
-    "save_map", "speed_filter", "speed_filter_lookahead", "static_layer", "world_to_cell",
-    "zone_filter",
+    "rasterize", "rasterize_mask", "save_map", "signed_distance", "soft_keepout_cost", "soft_speed_limit",
+    "speed_filter", "speed_filter_lookahead", "static_layer", "world_to_cell", "zone_filter",
+    "zone_speed_limits",
 ]

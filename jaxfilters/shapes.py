@@ -465,12 +465,25 @@ def _centre(index, origin, half_res):
 
 
 def _floor_quotient(terms, res, lo, hi):
-  """Exact floor(sum(terms) / res) clipped to [lo, hi]; safe for quotients far off the grid."""
+  """Exact floor(sum(terms) / res) clipped to [lo, hi], and resolved; safe far off the grid.
+
+  The float32 estimate is within 0.4 of the quotient when |quotient| <= 2**21
+  (three correctly rounded operations), so the floor is q0 - 1, q0 or q0 + 1:
+  the exact signs of sum - q0 res and sum - (q0 + 1) res decide. Beyond 2**21
+  the quotient is off the grid for sure and only its side matters.
+  """
+  shape = jnp.broadcast_shapes(*[jnp.shape(t) for t in terms])
   approx = sum(terms[1:], terms[0]) / res
-  q = geometry.floor_div_exact(terms, res)
   far = ~(jnp.abs(approx) <= _BIG_QUOTIENT)
+  q0 = jnp.floor(jnp.where(far, 0.0, approx))
+  cand = jnp.stack([q0, q0 + 1.0])                                    # [2, *shape]
+  diff = _terms(*[jnp.broadcast_to(t, shape)[None] for t in terms],
+                -jnp.stack(geometry.exact_product(cand, res)), shape=(2, *shape))
+  sign, resolved = exact_sign(diff.reshape(diff.shape[0], -1))
+  sign, resolved = sign.reshape(2, *shape), resolved.reshape(2, *shape)
+  q = q0.astype(jnp.int32) - (sign[0] < 0) + (sign[1] >= 0)
   q = jnp.where(far, jnp.where(approx > 0, hi, lo), q)
-  return jnp.clip(q, lo, hi)
+  return jnp.clip(q, lo, hi), far | jnp.all(resolved, axis=0)
 
 
 def _first_true(pred, lo, hi, guess):
@@ -536,7 +549,7 @@ def _polygon_cover(shapes: Shapes, origin, res, h: int, w: int):
 
   # Rows r with py <= y_v are r <= R_v (exact floor); edge (i, j) is active on rows in
   # (min(R_i, R_j), max(R_i, R_j)], which is Nav2's (py <= y_i) == (py > y_j).
-  row_cut = _floor_quotient([verts[..., 1], -oy, -hs], res, -1, h)   # [P, V]
+  row_cut, cut_ok = _floor_quotient([verts[..., 1], -oy, -hs], res, -1, h)   # [P, V]
   row_cut_j = jnp.where(wraps, row_cut[:, :1], jnp.roll(row_cut, -1, axis=1))
   rows = jnp.arange(h, dtype=jnp.int32)
   r_lo = jnp.minimum(row_cut, row_cut_j)[..., None]
@@ -577,7 +590,7 @@ def _polygon_cover(shapes: Shapes, origin, res, h: int, w: int):
   at_or_left = jnp.cumsum(counts, axis=-1)[..., :w]                   # edges with bnd <= c
   total = jnp.sum(active, axis=1).astype(jnp.int32)[..., None]        # [P, H, 1]
   inside = ((total - at_or_left) % 2) == 1
-  ok_p = jnp.all(ok | ~active, axis=(1, 2))
+  ok_p = jnp.all(ok | ~active, axis=(1, 2)) & jnp.all(cut_ok | ~lane_ok, axis=1)
   drawn = shape_ok & ok_p
   return inside & drawn[:, None, None], ~shapes.polygon_active | drawn
 
@@ -615,7 +628,8 @@ def _circle_cover(shapes: Shapes, origin, res, h: int, w: int):
     return sign.reshape(lanes) >= 0, resolved.reshape(lanes)
 
   # Columns with px <= cx: [0, m). Left of the centre "inside" grows with c, right of it shrinks.
-  m = _floor_quotient([cx, -ox, -hs], res, -1, w - 1) + 1             # [C, H] in [0, w]
+  m, m_ok = _floor_quotient([cx, -ox, -hs], res, -1, w - 1)
+  m = m + 1                                                            # [C, H] in [0, w]
   m = jnp.where(live, m, 0)
   py = oy + (rows.astype(_F32) + 0.5) * res
   half = jnp.sqrt(jnp.maximum(r * r - (py - cy) ** 2, 0.0))
@@ -637,7 +651,7 @@ def _circle_cover(shapes: Shapes, origin, res, h: int, w: int):
   ok_l, ok_r = ok[0], ok[1]
   cols = jnp.arange(w, dtype=jnp.int32)
   inside = (cols[None, None] >= left[..., None]) & (cols[None, None] < right[..., None])
-  ok_c = jnp.all((ok_l & ok_r) | ~live, axis=1)
+  ok_c = jnp.all((ok_l & ok_r & m_ok) | ~live, axis=1)
   drawn = shape_ok & ok_c
   return inside & drawn[:, None, None], ~shapes.circle_active | drawn
 
