@@ -20,6 +20,10 @@ from jaxfilters.nav2 import (Nav2BinaryFilter, Nav2Costmap, Nav2Filter, Nav2Keep
                              Nav2ParamsWarning, Nav2Readout, Nav2SpeedFilter, Nav2ZoneFilter, ZoneSetpoint,
                              ZoneStateConfig, load_params)
 from jaxfilters.query import binary_at, keepout_cost_at, speed_limit_at, zone_at
+from jaxfilters.shapes import (OVERLAY_MAX, OVERLAY_MIN, OVERLAY_SEQ, Circle, Polygon, RasterResult, Shapes,
+                               rasterize, rasterize_mask)
+from jaxfilters.soft import (signed_distance, soft_keepout_cost, soft_speed_limit,
+                             zone_speed_limits)
 from jaxfilters.speed import (LookaheadConfig, SpeedResult, SpeedState, speed_filter,
                               speed_filter_lookahead)
 from jaxfilters.static_layer import StaticLayerConfig, static_layer
@@ -27,17 +31,17 @@ from jaxfilters.types import Costmap, FilterInfo, FilterMask
 from jaxfilters.zone import ZoneResult, ZoneState, ZoneTable, zone_filter
 
 __all__ = [
-    "__version__", "BinaryResult", "BinaryState", "Costmap", "FilterInfo", "FilterMask", "InflationConfig",
-    "KeepoutConfig", "KeepoutState", "LayersConfig", "LookaheadConfig", "MAX_MAP_CELLS",
-    "MapMetadata", "Nav2BinaryFilter", "Nav2Costmap",
-    "Nav2Filter", "Nav2KeepoutFilter", "Nav2Params", "Nav2ParamsWarning", "Nav2Readout", "Nav2SpeedFilter",
-    "Nav2ZoneFilter", "OccupancyGrid",
-    "SpeedResult", "SpeedState", "StaticLayerConfig", "ZoneResult", "ZoneSetpoint", "ZoneState",
-    "ZoneStateConfig", "ZoneTable",
-    "binary_at", "binary_filter", "constants", "costmap_pipeline", "footprint_radii", "inflate",
-    "jaus", "keepout_cost_at", "keepout_filter", "keepout_update_bounds", "load_map", "load_map_image",
-    "load_map_with_metadata", "load_params",
-    "occ_to_cost", "ros", "save_map", "speed_filter", "speed_filter_lookahead", "speed_limit_at", "static_layer",
-    "world_to_cell",
-    "zone_at", "zone_filter",
+    "__version__", "BinaryResult", "BinaryState", "Circle", "Costmap", "FilterInfo", "FilterMask",
+    "InflationConfig", "KeepoutConfig", "KeepoutState", "LayersConfig", "LookaheadConfig",
+    "MAX_MAP_CELLS", "MapMetadata", "Nav2BinaryFilter", "Nav2Costmap", "Nav2Filter",
+    "Nav2KeepoutFilter", "Nav2Params", "Nav2ParamsWarning", "Nav2Readout", "Nav2SpeedFilter",
+    "Nav2ZoneFilter", "OVERLAY_MAX", "OVERLAY_MIN", "OVERLAY_SEQ", "OccupancyGrid", "Polygon",
+    "RasterResult", "Shapes", "SpeedResult", "SpeedState", "StaticLayerConfig", "ZoneResult",
+    "ZoneSetpoint", "ZoneState", "ZoneStateConfig", "ZoneTable", "binary_at", "binary_filter",
+    "constants", "costmap_pipeline", "footprint_radii", "inflate", "jaus", "keepout_cost_at",
+    "keepout_filter", "keepout_update_bounds", "load_map", "load_map_image",
+    "load_map_with_metadata", "load_params", "occ_to_cost", "rasterize", "rasterize_mask", "ros",
+    "save_map", "signed_distance", "soft_keepout_cost", "soft_speed_limit", "speed_filter",
+    "speed_filter_lookahead", "speed_limit_at", "static_layer", "world_to_cell", "zone_at",
+    "zone_filter", "zone_speed_limits",
 ]
