@@ -17,6 +17,7 @@ export PYTHONUNBUFFERED=1
 
 echo "== devices"
 nvidia-smi -L || true
+echo "C++ peer compiler: $(command -v "${CXX:-g++}" || echo "none (the keepout figures say the peer was skipped)")"
 python3 -c 'import sys, jax, mujoco; print("python", sys.version.split()[0], "jax", jax.__version__, "mujoco", mujoco.__version__); print(jax.devices())'
 
 echo "== exact-arithmetic tests on the GPU (FMA contraction) -> $OUT/gpu_tests.log"

@@ -7,6 +7,10 @@ Every figure is a dict with its parameters (B, H, W, mask size, dtype),
 `block_until_ready`, inputs rotated among >= 2 sets so caches do not flatter),
 `throughput` and `unit`. `--json` prints one JSON object on stdout; a table
 goes to stderr either way.
+
+Every keepout figure also times the Nav2-style C++ peer (benchmarks/nav2_keepout_peer.cpp,
+built here with g++ -O2, one core) on the same inputs after checking its integers, and
+reports `speedup_vs_cpp`; without a compiler `cpp_peer` says why it was skipped.
 """
 
 from __future__ import annotations
@@ -27,6 +31,8 @@ import numpy as np
 import jaxfilters as jf
 from jaxfilters.grid import OccupancyGrid
 
+from benchmarks import nav2_peer
+
 RES = 0.05
 NAMES = ("bandwidth", "keepout_aligned", "keepout_other_res", "keepout_transform", "speed", "binary",
          "zone", "inflation", "pipeline", "baseline_keepout", "baseline_speed", "fleet")
@@ -35,26 +41,34 @@ NAMES = ("bandwidth", "keepout_aligned", "keepout_other_res", "keepout_transform
 def sizes(platform_name: str, quick: bool) -> dict:
   if quick:
     return dict(keepout_b=32, hw=100, mask=500, filter_b=256, infl_b=16, pipe_b=16, copy_mb=32,
-                base_keepout_b=4, base_speed_b=64, fleet_robots=8, fleet_steps=5, repeats=5)
+                base_keepout_b=4, base_speed_b=64, fleet_robots=8, fleet_steps=5, repeats=5, cpp_keepout_b=32)
+  # cpp_keepout_b: robots the C++ peer runs (the first ones of the same inputs); all of them on
+  # the CPU, a 256-robot prefix beside a GPU fleet (one core would take minutes for 16384).
   if platform_name == "cpu":
     return dict(keepout_b=256, hw=200, mask=2000, filter_b=4096, infl_b=64, pipe_b=64, copy_mb=256,
-                base_keepout_b=16, base_speed_b=512, fleet_robots=1024, fleet_steps=100, repeats=5)
+                base_keepout_b=16, base_speed_b=512, fleet_robots=1024, fleet_steps=100, repeats=5,
+                cpp_keepout_b=256)
   return dict(keepout_b=16384, hw=200, mask=2000, filter_b=65536, infl_b=16384, pipe_b=4096,
               copy_mb=2048, base_keepout_b=16, base_speed_b=512, fleet_robots=65536, fleet_steps=100,
-              repeats=7)
+              repeats=7, cpp_keepout_b=256)
 
 
 # ----------------------------------------------------------------------------- timing
 
 
-def measure(fn, input_sets, repeats):
-  """(compile_s, steady_s median, all steady times) for jitted fn over rotated input sets."""
+def measure(fn, input_sets, repeats, outputs=None):
+  """(compile_s, steady_s median, all steady times) for jitted fn over rotated input sets.
+
+  `outputs`, a list, receives each input set's result from the warm-up runs.
+  """
   jitted = jax.jit(fn)
   t = time.perf_counter()
   compiled = jitted.lower(*input_sets[0]).compile()
   compile_s = time.perf_counter() - t
   for args in input_sets:                       # warm every set once (allocations, first touch)
-    jax.block_until_ready(compiled(*args))
+    out = jax.block_until_ready(compiled(*args))
+    if outputs is not None:
+      outputs.append(out)
   times = []
   for k in range(max(repeats, 5)):
     args = input_sets[k % len(input_sets)]
@@ -90,8 +104,15 @@ def keepout_inputs(seed, b, hw, n, mask_res, transform):
   cm = jf.Costmap.create(cost, origin, RES)
   tf = None
   if transform:
-    tf = jnp.asarray(np.stack([rng.uniform(-1, 1, b), rng.uniform(-1, 1, b), rng.uniform(-np.pi, np.pi, b)],
-                              1).astype(np.float32))
+    # T_mask_from_global turns each window about its centre by any yaw and shifts it by up to
+    # 1 m, so the rotated window still lies over the mask (a turn about the world origin, as
+    # before 2026-11-23, put 3/4 of the cells off the mask, where a per-cell loop stops early).
+    yaw = rng.uniform(-np.pi, np.pi, b)
+    centre = origin.astype(np.float64) + 0.5 * hw * RES
+    c, s = np.cos(yaw), np.sin(yaw)
+    turned = np.stack([c * centre[:, 0] - s * centre[:, 1], s * centre[:, 0] + c * centre[:, 1]], 1)
+    shift = centre + rng.uniform(-1, 1, (b, 2)) - turned
+    tf = jnp.asarray(np.concatenate([shift, yaw[:, None]], 1).astype(np.float32))
   return cm, mask, tf
 
 
@@ -123,12 +144,27 @@ def bench_keepout(kind, sz, b):
     out, st = jf.keepout_filter(cm, mask, poses, state, transform=tf)
     return out.cost, st
 
-  c, s, _ = measure(fn, sets, sz["repeats"])
+  outs = []
+  c, s, _ = measure(fn, sets, sz["repeats"], outputs=outs)
   cells = b * hw * hw
-  return figure(kind, dict(B=b, H=hw, W=hw, mask=[n, n], mask_res=mask_res, costmap_res=RES,
-                           dtype="uint8 cost, int8 mask", transform=transform,
-                           path="aligned slice" if kind == "keepout_aligned" else "general gather"),
-                c, s, cells, "cells/s", bytes_per_cell=3)
+  fig = figure(kind, dict(B=b, H=hw, W=hw, mask=[n, n], mask_res=mask_res, costmap_res=RES,
+                          dtype="uint8 cost, int8 mask", transform=transform),
+               c, s, cells, "cells/s", bytes_per_cell=3)
+  fig["cpp_peer"] = cpp_peer_figure(sets, [o[0] for o in outs], min(b, sz["cpp_keepout_b"]), sz["repeats"])
+  return fig
+
+
+def cpp_peer_figure(sets, jax_costs, b, repeats, label="JAX"):
+  """The C++ peer on the first b robots of each (costmap, mask, transform) set: checked, then timed."""
+  fn, desc = nav2_peer.build()
+  if fn is None:
+    return dict(skipped=desc)
+  inputs = [nav2_peer.host_inputs(cm, mask, transform=tf, num_robots=b) for cm, mask, tf in sets]
+  checks = [nav2_peer.check(fn, inp, np.asarray(cost)[:b], label) for inp, cost in zip(inputs, jax_costs)]
+  steady, _ = nav2_peer.time_peer(fn, inputs, repeats)
+  h, w = inputs[0]["cost"].shape[1:]
+  return dict(impl=desc, B=b, steady_s=steady, throughput=b * h * w / steady, unit="cells/s",
+              check=checks[0] + f" (and {len(checks) - 1} more input set(s) checked the same way)")
 
 
 def bench_point_filter(kind, sz, b):
@@ -259,9 +295,10 @@ def numpy_keepout_one(cost, origin, res, data, mask_origin, mask_res):
 
 def bench_baseline_keepout(sz, b):
   hw, n = sz["hw"], sz["mask"]
-  sets = []
+  sets, cpu_sets = [], []
   for s in range(2):
     cm, mask, _ = keepout_inputs(s, b, hw, n, RES, False)
+    cpu_sets.append((cm, mask, None))
     sets.append((np.asarray(cm.cost), np.asarray(cm.origin, np.float64), float(cm.resolution[0]),
                  np.asarray(mask.data[0]), np.asarray(mask.origin[0], np.float64), float(mask.resolution[0])))
   times = []
@@ -272,8 +309,14 @@ def bench_baseline_keepout(sz, b):
       numpy_keepout_one(cost[r], origin[r], res, data, mo, mres)
     times.append(time.perf_counter() - t)
   st = float(np.median(times))
-  return figure("baseline_keepout", dict(B=b, H=hw, W=hw, mask=[n, n], impl="numpy per-robot loop, float64",
-                                         dtype="uint8 cost, int8 mask"), 0.0, st, b * hw * hw, "cells/s")
+  fig = figure("baseline_keepout", dict(B=b, H=hw, W=hw, mask=[n, n], impl="numpy per-robot loop, float64",
+                                        dtype="uint8 cost, int8 mask"), 0.0, st, b * hw * hw, "cells/s")
+  # The peer on the same inputs; its integers checked against the NumPy loop's (aligned
+  # geometry: no cell centre near a mask-cell edge, so float64 NumPy is exact here).
+  numpy_out = [np.stack([numpy_keepout_one(c[r], o[r], rs, d, mo, mr) for r in range(b)])
+               for c, o, rs, d, mo, mr in sets]
+  fig["cpp_peer"] = cpp_peer_figure(cpu_sets, numpy_out, b, sz["repeats"], label="the NumPy loop")
+  return fig
 
 
 def bench_baseline_speed(sz, b):
@@ -356,6 +399,11 @@ def table(report) -> str:
       note = f"{r['roofline_pct']:.1f}% of copy bandwidth at 3 B/cell"
     if "speedup_vs_numpy" in r:
       note += f"  x{r['speedup_vs_numpy']:.2g} vs numpy"
+    peer = r.get("cpp_peer")
+    if peer and "throughput" in peer:
+      note += f"  x{r['speedup_vs_cpp']:.3g} vs C++ peer ({_fmt(peer['throughput'], 'cells/s')}, 1 core)"
+    elif peer:
+      note += f"  C++ peer {peer.get('skipped', '')}"
     lines.append(f"{name:22s} {b!s:>7s} {r['compile_s']:10.3f} {r['steady_s']:10.5f} "
                  f"{_fmt(r['throughput'], r['unit']):>18s}  {note}")
   return "\n".join(lines)
@@ -420,6 +468,11 @@ def main(argv=None) -> int:
     base = results.get("baseline_keepout", {}).get("throughput")
     if r and "throughput" in r and base and name.startswith("keepout"):
       r["speedup_vs_numpy"] = r["throughput"] / base
+  for name in ("keepout_aligned", "keepout_other_res", "keepout_transform", "baseline_keepout"):
+    r = results.get(name)
+    peer = (r or {}).get("cpp_peer", {})
+    if "throughput" in (r or {}) and "throughput" in peer:
+      r["speedup_vs_cpp"] = r["throughput"] / peer["throughput"]
   base = results.get("baseline_speed", {}).get("throughput")
   if base and "throughput" in results.get("speed", {}):
     results["speed"]["speedup_vs_numpy"] = results["speed"]["throughput"] / base
