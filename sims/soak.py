@@ -10,7 +10,8 @@ After every chunk (one compiled `FleetEnv.rollout_fn`, states carried) it checks
   limit + `FleetConfig.speed_tolerance`;
 * flat device memory: `device.memory_stats()["bytes_in_use"]` where the
   backend reports it (GPU), else the number of live jax.Arrays (CPU); after the
-  first chunk (warm-up) the figure may not grow.
+  first chunk (warm-up) the peak of the later half of the chunks may not exceed
+  the peak of the earlier half (the allocator makes the figure oscillate).
 
 It prints one line per chunk and a JSON report; the exit code is 0 when every
 check passed, 3 (the CLI's "a robot broke a rule") otherwise.
@@ -101,7 +102,15 @@ def run_soak(*, num_worlds: int = 16, robots_per_world: int = 4, chunk_steps: in
       log(f"chunk {c + 1}/{num_chunks}: {(c + 1) * chunk_steps * num_worlds} world-steps, nan {nan}, "
           f"keepout entries {entries}, worst zone excess {worst:+.4f} m/s, {kind} {mem}")
   seconds = time.perf_counter() - t0
-  growth = int(max(memory[1:]) - memory[0]) if len(memory) > 1 else 0
+  # bytes_in_use oscillates as the allocator reuses blocks (seen on an H100: 43.7-55.1 MB over
+  # 10 chunks, back to 43.7 MB at chunk 7), so "flat" means no upward trend: after the
+  # warm-up chunk, the later half's peak does not exceed the earlier half's peak.
+  steady = memory[1:]
+  if len(steady) >= 2:
+    half = len(steady) // 2
+    growth = int(max(steady[half:]) - max(steady[:half]))
+  else:
+    growth = 0
   entries = int(np.asarray(states.metrics.keepout_entries).sum())
   ksteps = int(np.asarray(states.metrics.keepout_steps).sum())
   compliant = bool(worst <= tol) if np.isfinite(worst) else True

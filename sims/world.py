@@ -252,19 +252,26 @@ def build_world(scenario: Scenario, config: FleetConfig, *, seed: int = 0) -> Wo
   stations = centres[pick].astype(np.float32)
   dist = navigation.distance_field(jnp.asarray(weight_m), jnp.asarray(cr[pick], jnp.int32),
                                    jnp.asarray(cc[pick], jnp.int32))
-  # Spawn points: reachable navigation cells that are not blocked (a robot there is clear of
-  # obstacles and keepout by at least its inscribed radius), picked greedily lowest cost first
-  # (random order among equal costs) at least SPAWN_SPACING apart. Small maps such as Nav2's
-  # tb3_sandbox have free space but little of it clear of the whole inflation radius.
-  free_r, free_c = np.nonzero(~blocked & np.isfinite(reach[best]))
-  order = np.lexsort((rng.random(len(free_r)), weight[free_r, free_c]))
-  pts = np.stack([ox + (free_c + 0.5) * nav_res, oy + (free_r + 0.5) * nav_res], axis=1)[order]
-  chosen = np.empty((0, 2))
-  for p in pts:
-    if len(chosen) == 0 or np.min(np.sum((chosen - p) ** 2, axis=1)) >= SPAWN_SPACING ** 2:
-      chosen = np.concatenate([chosen, p[None]])
+  # Spawn points: reachable navigation cells, at least SPAWN_SPACING apart, picked greedily in a
+  # seeded random order from the cells clear of the whole inflation radius (cost 0) first; only
+  # when those cannot host robots_per_world robots are other free cells (cost below inscribed,
+  # so a robot there is clear of obstacles and keepout) added. Nav2's small tb3_sandbox has
+  # free space but little of it clear of the whole inflation radius.
+  reachable = np.isfinite(reach[best])
+
+  def pick(cells, chosen):
+    r, c = np.nonzero(cells)
+    pts = np.stack([ox + (c + 0.5) * nav_res, oy + (r + 0.5) * nav_res], axis=1)[rng.permutation(len(r))]
+    for p in pts:
       if len(chosen) >= MAX_SPAWNS:
         break
+      if len(chosen) == 0 or np.min(np.sum((chosen - p) ** 2, axis=1)) >= SPAWN_SPACING ** 2:
+        chosen = np.concatenate([chosen, p[None]])
+    return chosen
+
+  chosen = pick(clear & reachable, np.empty((0, 2)))
+  if len(chosen) < config.robots_per_world:
+    chosen = pick(~blocked & ~clear & reachable, chosen)
   spawns = chosen.astype(np.float32)
   if len(spawns) < config.robots_per_world:
     raise ValueError(f"the map has room for {len(spawns)} robots per world (free cells clear of "

@@ -69,8 +69,9 @@ def test_mutated_inputs_raise_only_value_or_file_errors(target, index):
 @pytest.mark.parametrize("target", list(fz.TARGETS))
 def test_every_seed_loads_to_its_expected_grid(target):
   for k, seed in enumerate(fz.seeds_of(target)):
-    grid = fz.TARGETS[target].run(seed.data)
-    np.testing.assert_array_equal(grid.data, seed.expected(), err_msg=f"{target} seed {k}")
+    grid = fz.TARGETS[target].run(seed.data)          # a valid seed never raises
+    if seed.expected is not None:                     # the JAUS seeds check only that they decode
+      np.testing.assert_array_equal(grid.data, seed.expected(), err_msg=f"{target} seed {k}")
 
 
 # --------------------------------------------------------------------------- damage never loads

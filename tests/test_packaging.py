@@ -32,7 +32,7 @@ def test_wheel_installs_only_jaxfilters_and_sims():
 def test_extras_are_named_for_what_they_bring():
   project = PYPROJECT["project"]
   extras = project["optional-dependencies"]
-  assert set(extras) == {"test", "notebook", "ros", "warp"}
+  assert set(extras) == {"test", "notebook", "ros", "rl", "warp"}
   assert {"ipykernel", "nbclient", "nbformat", "matplotlib"} <= _names(extras["notebook"])
   assert {"pytest", "hypothesis", "chex", "jaxfilters"} <= _names(extras["test"])   # jaxfilters[notebook]
   assert any("jaxfilters[notebook]" in r for r in extras["test"])
