@@ -677,7 +677,7 @@ def _same_frame_batch(costmap, mask, idx, idx_ok, state, window, enabled, *, con
   # (four quotients; often open when the grids line up, cheap) apart from the vectors.
   cells, cells_known, flags, flags_known = jax.vmap(prologue, in_axes=in_axes)(*args)
   (mx, vx), (my, vy) = _rerun(~cells_known, cells, exact("cells"), args, _rerun_capacity(b))
-  col_ok, row_ok, run = _rerun(~flags_known, flags, exact("flags"), args, b)
+  col_ok, row_ok, run = _rerun(~flags_known, flags, exact("flags"), args, max(8, b // 16))
   new_state = _with_error(jax.vmap(_processed)(state, run), ~idx_ok)
   k0x, okx = jax.vmap(_consecutive, in_axes=(0, 0, None))(mx, vx, wm)
   k0y, oky = jax.vmap(_consecutive, in_axes=(0, 0, None))(my, vy, hm)
@@ -702,9 +702,11 @@ def _same_frame_batch(costmap, mask, idx, idx_ok, state, window, enabled, *, con
                             lambda: gather(c, i, mx, vx, my, vy, co, ro, st))
       return jax.lax.map(body, (*cells, sx, sy, sliced))
 
-    # A branch inside the loop costs a copy of every robot's slice result (2x on
-    # XLA:CPU), so a fleet that is sliced throughout runs a loop without one.
-    return jax.lax.cond(jnp.all(sliced), all_sliced, mixed), new_state
+    # A branch inside the loop costs a copy of every robot's result (2x for the slice on
+    # XLA:CPU), so a fleet that is sliced, or gathered, throughout runs a loop without one.
+    gather_all = lambda: jax.lax.map(lambda a: gather(*a), cells)
+    return jax.lax.cond(jnp.all(sliced), all_sliced,
+                        lambda: jax.lax.cond(jnp.any(sliced), mixed, gather_all)), new_state
   if loop != "vmap":
     raise ValueError(f"loop must be 'auto', 'map' or 'vmap'; got {loop!r}")
   if packed is None:
@@ -771,6 +773,10 @@ def _rerun(need, fast, exact_fn, args, capacity):
   order = jnp.nonzero(need, size=b + capacity, fill_value=0)[0]
 
   def body(k, out):
+    if capacity == 1:   # in-place slices: a scatter would copy the whole batch each turn
+      r = order[k]
+      res = exact_fn(jax.tree.map(lambda a: jax.lax.dynamic_slice_in_dim(a, r, 1), args))
+      return jax.tree.map(lambda o, x: jax.lax.dynamic_update_slice_in_dim(o, x, r, 0), out, res)
     sel = jax.lax.dynamic_slice(order, (k * capacity,), (capacity,))
     res = exact_fn(jax.tree.map(lambda a: a[sel], args))
     return jax.tree.map(lambda o, r: o.at[sel].set(r), out, res)
@@ -827,11 +833,11 @@ def _se2_batch(costmap, mask, idx, idx_ok, state, window, enabled, transform, *,
                loop: str):
   """The fast other-frame keepout over a fleet: same integers as the exact path.
 
-  Two passes: the cells' codes (`_se2_codes_one`, in chunks of robots so that XLA
-  writes them out instead of fusing the arithmetic into the gather, which runs it
-  several times slower), then the gather and the write rule. Robots with undecided
-  cells are then settled by `_se2_fix_one`: one after another in a loop of as many
-  turns as there are such robots ("map"), or gathered and settled together ("vmap").
+  Two passes: the cells' codes (`_se2_codes_one`, written out so that XLA does not
+  fuse the arithmetic into the gather, which runs it several times slower), then the
+  gather and the write rule. Robots with undecided cells are then settled by
+  `_se2_fix_one` (`_rerun`): one after another in a loop of as many turns as there
+  are such robots ("map"), or gathered and settled together ("vmap").
   """
   b, h, w = costmap.cost.shape
   m, hm, wm = mask.data.shape
@@ -853,6 +859,10 @@ def _se2_batch(costmap, mask, idx, idx_ok, state, window, enabled, transform, *,
   def write(c, k, st):
     return jax.vmap(lambda c, k, st: _se2_write_one(c, k, flat, st, config=config))(c, k, st)
 
+  def fix(new, code, old, ax, i, st, win, rn):
+    return _se2_fix_one(new, code, old, ax, mask.data, i, _mask_origin(mask, i), mask.resolution[i], st, win, rn,
+                        config=config)
+
   per_robot = (axes, idx, window, run)
   if loop == "map":
     # Chunks of robots, each: codes robot by robot (an inner loop, so XLA writes them out),
@@ -865,26 +875,23 @@ def _se2_batch(costmap, mask, idx, idx_ok, state, window, enabled, transform, *,
     def chunk(a):
       pr, c, st = a
       k = jax.lax.map(codes_one, pr)
-      return write(c, k, st), ~jnp.any(k == -2, axis=(1, 2))
+      return write(c, k, st), jnp.any(k == -2, axis=(1, 2))
 
-    cost, proven = jax.lax.map(chunk, jax.tree.map(split, (per_robot, costmap.cost, state)))
-    cost, proven = cost.reshape(b, h, w), proven.reshape(b)
-  else:
-    chunk_cells = _PASS_CHUNK_CELLS_CPU if jax.default_backend() == "cpu" else _PASS_CHUNK_CELLS
-    codes = jax.lax.map(codes_one, per_robot, batch_size=_divisor_at_most(b, chunk_cells // (h * w)))
-    cost = write(costmap.cost, codes, state)
-    proven = ~jnp.any(codes == -2, axis=(1, 2))
+    cost, need = jax.lax.map(chunk, jax.tree.map(split, (per_robot, costmap.cost, state)))
+    cost, need = cost.reshape(b, h, w), need.reshape(b)
 
-  def fix(new, old, ax, i, st, win, rn):
-    code = codes_one((ax, i, win, rn))
-    return _se2_fix_one(new, code, old, ax, mask.data, i, _mask_origin(mask, i), mask.resolution[i], st, win, rn,
-                        config=config)
-
-  args = (cost, costmap.cost, axes, idx, state, window, run)
-  capacity = 1 if loop == "map" else _rerun_capacity(b)
-  if loop not in ("map", "vmap"):
+    def settle(new, old, ax, i, st, win, rn):
+      return fix(new, codes_one((ax, i, win, rn)), old, ax, i, st, win, rn)
+    args = (cost, costmap.cost, axes, idx, state, window, run)
+    return _rerun(need, cost, lambda a: jax.vmap(settle)(*a), args, 1), new_state
+  if loop != "vmap":
     raise ValueError(f"loop must be 'auto', 'map' or 'vmap'; got {loop!r}")
-  return _rerun(~proven, cost, lambda a: jax.vmap(fix)(*a), args, capacity), new_state
+  chunk_cells = _PASS_CHUNK_CELLS_CPU if jax.default_backend() == "cpu" else _PASS_CHUNK_CELLS
+  codes = jax.lax.map(codes_one, per_robot, batch_size=_divisor_at_most(b, chunk_cells // (h * w)))
+  cost = write(costmap.cost, codes, state)
+  need = jnp.any(codes == -2, axis=(1, 2))
+  args = (cost, codes, costmap.cost, axes, idx, state, window, run)
+  return _rerun(need, cost, lambda a: jax.vmap(fix)(*a), args, _rerun_capacity(b)), new_state
 
 
 def _general_batch(costmap, mask, idx, idx_ok, state, window, enabled, transform, *, config: KeepoutConfig):
