@@ -798,13 +798,14 @@ _FIX_CELLS = 64   # undecided cells of one robot settled one by one before the w
 
 
 def _se2_fix_one(new_cost, code, cost, axes, stack, i, mask_origin, mask_res, state, window, run, *,
-                 config: KeepoutConfig):
+                 config: KeepoutConfig, mode: str = "auto"):
   """Settles one robot's undecided cells (code -2) exactly: its final cost, uint8 [H, W].
 
-  Up to `_FIX_CELLS` of them are gathered and mapped with `geometry.world_to_cell`
-  (the exact path's arithmetic, on the same float32 points); with more, the robot's
-  whole window runs `_keepout_stack_one`. Padding slots redo cell 0, whose exact
-  result is right either way.
+  `mode` "few" maps up to `_FIX_CELLS` of them with `geometry.world_to_cell` (the
+  exact path's arithmetic, on the same float32 points; padding slots redo cell 0,
+  whose exact result is right either way); "whole" reruns the robot's window with
+  `_keepout_stack_one`; "auto" picks "few" when it covers them all (a real branch on
+  the CPU loop; under vmap the batch code calls the modes apart).
   """
   h, w = cost.shape
   hm, wm = stack.shape[1:]
@@ -826,6 +827,10 @@ def _se2_fix_one(new_cost, code, cost, axes, stack, i, mask_origin, mask_res, st
     return _keepout_stack_one(cost, None, None, stack, i, mask_origin, mask_res, state, window, run, None,
                               config=config, axes=axes)[0]
 
+  if mode == "few":
+    return few()
+  if mode == "whole":
+    return whole()
   return jax.lax.cond(jnp.sum(undecided.astype(jnp.int32)) <= _FIX_CELLS, few, whole)
 
 
@@ -859,9 +864,9 @@ def _se2_batch(costmap, mask, idx, idx_ok, state, window, enabled, transform, *,
   def write(c, k, st):
     return jax.vmap(lambda c, k, st: _se2_write_one(c, k, flat, st, config=config))(c, k, st)
 
-  def fix(new, code, old, ax, i, st, win, rn):
+  def fix(new, code, old, ax, i, st, win, rn, mode="auto"):
     return _se2_fix_one(new, code, old, ax, mask.data, i, _mask_origin(mask, i), mask.resolution[i], st, win, rn,
-                        config=config)
+                        config=config, mode=mode)
 
   per_robot = (axes, idx, window, run)
   if loop == "map":
@@ -889,9 +894,16 @@ def _se2_batch(costmap, mask, idx, idx_ok, state, window, enabled, transform, *,
   chunk_cells = _PASS_CHUNK_CELLS_CPU if jax.default_backend() == "cpu" else _PASS_CHUNK_CELLS
   codes = jax.lax.map(codes_one, per_robot, batch_size=_divisor_at_most(b, chunk_cells // (h * w)))
   cost = write(costmap.cost, codes, state)
-  need = jnp.any(codes == -2, axis=(1, 2))
+  undecided = jnp.sum((codes == -2).astype(jnp.int32), axis=(1, 2))
+  many = undecided > _FIX_CELLS
   args = (cost, codes, costmap.cost, axes, idx, state, window, run)
-  return _rerun(need, cost, lambda a: jax.vmap(fix)(*a), args, _rerun_capacity(b)), new_state
+  # Under vmap a branch runs both sides, so the few-cells and whole-window fixes are
+  # separate passes, each over the robots that need it.
+  few = functools.partial(fix, mode="few")
+  cost = _rerun((undecided > 0) & ~many, cost, lambda a: jax.vmap(few)(*a), args, _rerun_capacity(b))
+  args = (cost,) + args[1:]
+  whole = functools.partial(fix, mode="whole")
+  return _rerun(many, cost, lambda a: jax.vmap(whole)(*a), args, min(b, 8)), new_state
 
 
 def _general_batch(costmap, mask, idx, idx_ok, state, window, enabled, transform, *, config: KeepoutConfig):
