@@ -167,7 +167,7 @@ def cpp_peer_figure(sets, jax_costs, b, repeats, label="JAX"):
   if fn is None:
     return dict(skipped=desc)
   inputs = [nav2_peer.host_inputs(cm, mask, transform=tf, num_robots=b) for cm, mask, tf in sets]
-  checks = [nav2_peer.check(fn, inp, np.asarray(cost)[:b], label) for inp, cost in zip(inputs, jax_costs)]
+  checks = [nav2_peer.check(fn, inp, np.asarray(cost[:b]), label) for inp, cost in zip(inputs, jax_costs)]
   steady, _ = nav2_peer.time_peer(fn, inputs, repeats)
   h, w = inputs[0]["cost"].shape[1:]
   return dict(impl=desc, B=b, steady_s=steady, throughput=b * h * w / steady, unit="cells/s",
