@@ -23,8 +23,11 @@ echo "C++ peer compiler: $(command -v "${CXX:-g++}" || echo "none (the keepout f
 python3 -c 'import sys, jax, mujoco; print("python", sys.version.split()[0], "jax", jax.__version__, "mujoco", mujoco.__version__); print(jax.devices())'
 
 echo "== exact-arithmetic tests on the GPU (FMA contraction) -> $OUT/gpu_tests.log"
-timeout "${TEST_TIMEOUT:-200}" python3 -m pytest -q tests/test_geometry.py tests/test_fast_paths.py \
-  tests/test_trust.py -k "not eager_speed_filter_compiles_once" -p no:cacheprovider > "$OUT/gpu_tests.log" 2>&1
+# test_keepout_paths: the fast paths' error bounds (2-ulp division, FMA, flush-to-zero) on this device;
+# test_trust: the double-geometry and issue 7 cases.
+timeout "${TEST_TIMEOUT:-300}" python3 -m pytest -q tests/test_geometry.py tests/test_fast_paths.py \
+  tests/test_keepout_paths.py tests/test_trust.py -k "not eager_speed_filter_compiles_once" \
+  -p no:cacheprovider > "$OUT/gpu_tests.log" 2>&1
 echo "pytest rc=$? ; tail:"; tail -n 3 "$OUT/gpu_tests.log"
 
 echo "== benchmarks (full sizes) -> $OUT/bench.json"

@@ -171,11 +171,3 @@ def _reference_check(got, inp):
   if not np.array_equal(got[0], want):
     raise AssertionError(f"C++ peer and tests/reference.py differ at {int((got[0] != want).sum())} cells")
   return "; equal to tests/reference.py (float64) on robot 0"
-
-
-def time_peer(fn, inputs, repeats):
-  """Median seconds of the peer over `inputs` (a list of host_inputs), rotated; copies not timed."""
-  for inp in inputs:
-    run(fn, inp)
-  times = [run(fn, inputs[k % len(inputs)])[1] for k in range(max(repeats, 5))]
-  return float(np.median(times)), times

@@ -56,10 +56,12 @@ def sizes(platform_name: str, quick: bool) -> dict:
 # ----------------------------------------------------------------------------- timing
 
 
-def measure(fn, input_sets, repeats, outputs=None):
+def measure(fn, input_sets, repeats, outputs=None, between=None):
   """(compile_s, steady_s median, all steady times) for jitted fn over rotated input sets.
 
-  `outputs`, a list, receives each input set's result from the warm-up runs.
+  `outputs`, a list, receives each input set's result from the warm-up runs;
+  `between(k)`, if given, runs (untimed here) after timed run k: a baseline timed
+  in turn with the JAX runs sees the same machine load (the VM is shared).
   """
   jitted = jax.jit(fn)
   t = time.perf_counter()
@@ -75,6 +77,8 @@ def measure(fn, input_sets, repeats, outputs=None):
     t = time.perf_counter()
     jax.block_until_ready(compiled(*args))
     times.append(time.perf_counter() - t)
+    if between is not None:
+      between(k)
   return compile_s, float(np.median(times)), times
 
 
@@ -145,26 +149,56 @@ def bench_keepout(kind, sz, b):
     return out.cost, st
 
   outs = []
-  c, s, _ = measure(fn, sets, sz["repeats"], outputs=outs)
+  peer = PeerTimer(sets, min(b, sz["cpp_keepout_b"]))
+  c, s, _ = measure(fn, sets, sz["repeats"], outputs=outs,
+                    between=lambda k: peer.run(k, [o[0] for o in outs] if k == 0 else None))
   cells = b * hw * hw
   fig = figure(kind, dict(B=b, H=hw, W=hw, mask=[n, n], mask_res=mask_res, costmap_res=RES,
                           dtype="uint8 cost, int8 mask", transform=transform),
                c, s, cells, "cells/s", bytes_per_cell=3)
-  fig["cpp_peer"] = cpp_peer_figure(sets, [o[0] for o in outs], min(b, sz["cpp_keepout_b"]), sz["repeats"])
+  fig["cpp_peer"] = peer.result()
+  try:   # which fast-path branches these inputs take (counts over the first 64 robots)
+    from jaxfilters import keepout as ko  # noqa: PLC0415
+    cm, mask, tf = sets[0]
+    sub = min(b, 64)
+    fig["paths"] = ko._path_report(jax.tree.map(lambda x: x[:sub], cm), mask, None if tf is None else tf[:sub])
+  except Exception as e:  # noqa: BLE001 - a report, never a reason to lose the figure
+    fig["paths"] = f"unavailable: {type(e).__name__}: {e}"
   return fig
 
 
-def cpp_peer_figure(sets, jax_costs, b, repeats, label="JAX"):
-  """The C++ peer on the first b robots of each (costmap, mask, transform) set: checked, then timed."""
-  fn, desc = nav2_peer.build()
-  if fn is None:
-    return dict(skipped=desc)
-  inputs = [nav2_peer.host_inputs(cm, mask, transform=tf, num_robots=b) for cm, mask, tf in sets]
-  checks = [nav2_peer.check(fn, inp, np.asarray(cost)[:b], label) for inp, cost in zip(inputs, jax_costs)]
-  steady, _ = nav2_peer.time_peer(fn, inputs, repeats)
-  h, w = inputs[0]["cost"].shape[1:]
-  return dict(impl=desc, B=b, steady_s=steady, throughput=b * h * w / steady, unit="cells/s",
-              check=checks[0] + f" (and {len(checks) - 1} more input set(s) checked the same way)")
+class PeerTimer:
+  """The C++ peer on the first b robots of each (costmap, mask, transform) set.
+
+  `run(k, costs)` checks the peer against `costs` (the result to match, per set)
+  when they are given, then times one peer run on set k % 2; the callers time it in
+  turn with their own runs. `result()` is the figure's `cpp_peer` entry.
+  """
+
+  def __init__(self, sets, b, label="JAX"):
+    self.fn, self.desc = nav2_peer.build()
+    self.b, self.label, self.times, self.checks = b, label, [], []
+    if self.fn is not None:
+      self.inputs = [nav2_peer.host_inputs(cm, mask, transform=tf, num_robots=b) for cm, mask, tf in sets]
+
+  def run(self, k, costs=None):
+    if self.fn is None:
+      return
+    if costs is not None:
+      self.checks = [nav2_peer.check(self.fn, inp, np.asarray(c[:self.b]), self.label)
+                     for inp, c in zip(self.inputs, costs)]
+      for inp in self.inputs:                   # warm (first touch), untimed
+        nav2_peer.run(self.fn, inp)
+    self.times.append(nav2_peer.run(self.fn, self.inputs[k % len(self.inputs)])[1])
+
+  def result(self):
+    if self.fn is None:
+      return dict(skipped=self.desc)
+    steady = float(np.median(self.times))
+    h, w = self.inputs[0]["cost"].shape[1:]
+    return dict(impl=self.desc, B=self.b, steady_s=steady, throughput=self.b * h * w / steady, unit="cells/s",
+                timed="in turn with the runs it is compared with", check=self.checks[0] +
+                f" (and {len(self.checks) - 1} more input set(s) checked the same way)")
 
 
 def bench_point_filter(kind, sz, b):
@@ -301,6 +335,12 @@ def bench_baseline_keepout(sz, b):
     cpu_sets.append((cm, mask, None))
     sets.append((np.asarray(cm.cost), np.asarray(cm.origin, np.float64), float(cm.resolution[0]),
                  np.asarray(mask.data[0]), np.asarray(mask.origin[0], np.float64), float(mask.resolution[0])))
+  # The peer on the same inputs, timed in turn with the NumPy loop; its integers checked
+  # against the NumPy loop's (aligned geometry: no cell centre near a mask-cell edge, so
+  # float64 NumPy is exact here).
+  numpy_out = [np.stack([numpy_keepout_one(c[r], o[r], rs, d, mo, mr) for r in range(b)])
+               for c, o, rs, d, mo, mr in sets]
+  peer = PeerTimer(cpu_sets, b, label="the NumPy loop")
   times = []
   for k in range(max(sz["repeats"], 5)):
     cost, origin, res, data, mo, mres = sets[k % 2]
@@ -308,14 +348,11 @@ def bench_baseline_keepout(sz, b):
     for r in range(b):
       numpy_keepout_one(cost[r], origin[r], res, data, mo, mres)
     times.append(time.perf_counter() - t)
+    peer.run(k, numpy_out if k == 0 else None)
   st = float(np.median(times))
   fig = figure("baseline_keepout", dict(B=b, H=hw, W=hw, mask=[n, n], impl="numpy per-robot loop, float64",
                                         dtype="uint8 cost, int8 mask"), 0.0, st, b * hw * hw, "cells/s")
-  # The peer on the same inputs; its integers checked against the NumPy loop's (aligned
-  # geometry: no cell centre near a mask-cell edge, so float64 NumPy is exact here).
-  numpy_out = [np.stack([numpy_keepout_one(c[r], o[r], rs, d, mo, mr) for r in range(b)])
-               for c, o, rs, d, mo, mr in sets]
-  fig["cpp_peer"] = cpp_peer_figure(cpu_sets, numpy_out, b, sz["repeats"], label="the NumPy loop")
+  fig["cpp_peer"] = peer.result()
   return fig
 
 

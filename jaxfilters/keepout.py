@@ -19,9 +19,20 @@ values 1..99, which give intermediate costs round(2.54 * d).
 Float policy: same-frame cell mapping is exact (jaxfilters.geometry), on the
 host doubles of the costmap's origin and resolution and the mask's origin
 (carried as float32 parts). With a frame transform (`transform` given) each
-master cell centre is rotated in float32, then mapped exactly; Nav2 rotates in
-float64, so a centre that lands within ~1e-6 m of a mask cell boundary may
-pick the neighbouring mask cell.
+master cell centre is rotated in float32 (every product formed by
+`geometry.rounded_product`, so the point does not depend on how XLA fuses the
+program; see `_se2_axes_one`), then mapped exactly; Nav2 rotates in float64, so
+a centre that lands within ~1e-6 m of a mask cell boundary may pick the
+neighbouring mask cell.
+
+Fast paths (same integers as the per-cell exact arithmetic, which the tests run
+beside them; benchmarks/NOTES.md has the measurements): same frame, two exact
+index vectors per robot decide every cell, bracketed in float32 and computed
+exactly only where a bracket stays open, and the mask cells are one slice of
+the mask when they are consecutive; with a transform, each cell's floor is
+decided in ~30 float32 operations with a proof (`geometry.world_to_index_checked`)
+and a robot with a cell left undecided (a centre exactly on a mask-cell edge)
+settles it with the exact arithmetic.
 
 Both public functions are jitted at the edge (STYLE.md habit 14): an eager
 call compiles once per shape and config, and inside a caller's `jit` they
@@ -45,6 +56,8 @@ from jaxfilters.types import Costmap, FilterMask, _dataclass, check_costmap, rob
 _F32 = jnp.float32
 _EMPTY_BOX = (np.inf, np.inf, -np.inf, -np.inf)
 _GENERAL_CHUNK_CELLS = 1 << 24  # cells per lax.map chunk of the general (per-cell) path
+_PASS_CHUNK_CELLS_CPU = 1 << 22  # cells per chunk of the fast SE2 path's first pass, CPU
+_PASS_CHUNK_CELLS = 1 << 26      # ... other backends
 
 
 def occ_to_cost(data: jax.Array) -> jax.Array:
@@ -73,12 +86,12 @@ class KeepoutConfig:
     override_lethal_cost: escape mode; while the robot's centre is in a lethal
       keepout cell, every cell the filter writes gets `lethal_override_cost`.
     lethal_override_cost: clamped to [0, 252] like Nav2 (MAX_NON_OBSTACLE).
-    aligned_fast_path: let `keepout_filter` take the slice path (same integers,
-      see `_aligned_batch`) when, at run time, every robot's costmap cells map
-      one to one onto consecutive mask cells (`_aligned_offsets`: equal
-      resolutions, or nearly equal ones with no cell edge between) and no
-      `transform` is given.
-      The choice is one batch-wide `lax.cond`, so both paths are compiled.
+    aligned_fast_path: let `keepout_filter` read a robot's mask cells as one
+      slice (same integers, see `_consecutive`) when, at run time, its exact
+      per-column and per-row mask indices are consecutive (same frame, equal
+      resolutions up to the float32 rounding of the mask's); False always
+      gathers them through the two index vectors. The choice is made at run
+      time (`lax.cond`), so both are compiled.
   """
   override_lethal_cost: bool = False
   lethal_override_cost: int = constants.MAX_NON_OBSTACLE
@@ -212,12 +225,47 @@ def _same_frame_window(shape_m, mask_origin, mask_res, origin, res, window):
   mo = [four(t) for t in geometry._as_terms(mask_origin)]
   o = [-four(t) for t in geometry._as_terms(origin)]
   extent = jnp.asarray([0.0, 0.0, wm, hm], _F32)       # corners (0, 0) and (Wm, Hm)
-  g = geometry.trunc_div_exact([*mo, *geometry.exact_product(extent, mask_res), half, *o], res)
+  g = geometry.trunc_div_exact([*mo, *geometry.exact_product(extent, mask_res), half, *o], res,
+                               sign_fn=geometry.expansion_sign_rolled)
   g0, g1 = (g[0], g[1]), (g[2], g[3])
   overlap = ~((g0[0] >= max_i) | (g0[1] >= max_j)) & ~((g1[0] <= min_i) | (g1[1] <= min_j))
   x0, y0 = jnp.maximum(min_i, g0[0]), jnp.maximum(min_j, g0[1])
   x1, y1 = jnp.minimum(max_i, g1[0]), jnp.minimum(max_j, g1[1])
   return overlap, (x0, y0, x1, y1)
+
+
+def _se2_axes_one(origin, res, transform, h, w):
+  """The rotated master cell centres of one robot as per-column and per-row float32 vectors.
+
+  The float32 rotation has one defined result: the centre cx = o + (k + 0.5) r with o,
+  r the float32 sums of the host parts, then R(yaw) (cx, cy) + t summed in
+  `geometry.transform_points`' order, every product a `geometry.rounded_product` (XLA
+  would otherwise fuse a product and the next sum into an FMA in some programs and not
+  in others: one jitted program gave the same centre two values an ulp apart). The
+  exact and the fast paths share these vectors, so they decide about the same points.
+
+  Args:
+    origin, res: float32 [2], [] (or lists of float32 parts). transform: float32 [3].
+    h, w: static costmap size.
+
+  Returns:
+    (xc, xs float32 [W]: c cx and s cx; yc, ys float32 [H]: c cy and s cy; t float32 [2]),
+    with c, s the float32 cos and sin of the yaw.
+  """
+  to, tr = geometry._as_terms(origin), geometry._as_terms(res)
+  o = sum(to[1:], to[0])
+  r = sum(tr[1:], tr[0])
+  cx = o[0] + geometry.rounded_product(jnp.arange(w, dtype=jnp.int32).astype(_F32) + 0.5, r)
+  cy = o[1] + geometry.rounded_product(jnp.arange(h, dtype=jnp.int32).astype(_F32) + 0.5, r)
+  c, s = jnp.cos(transform[2]), jnp.sin(transform[2])
+  mul = geometry.rounded_product
+  return mul(c, cx), mul(s, cx), mul(c, cy), mul(s, cy), transform[:2]
+
+
+def _se2_grid(axes):
+  """float32 [H, W] (px, py) from `_se2_axes_one`: (c cx - s cy) + tx, (s cx + c cy) + ty (sums only)."""
+  xc, xs, yc, ys, t = axes
+  return (xc[None, :] - ys[:, None]) + t[0], (xs[None, :] + yc[:, None]) + t[1]
 
 
 def keepout_one(cost, origin, res, data, mask_origin, mask_res, state, window, enabled,
@@ -227,7 +275,7 @@ def keepout_one(cost, origin, res, data, mask_origin, mask_res, state, window, e
 
 
 def _keepout_stack_one(cost, origin, res, stack, i, mask_origin, mask_res, state, window, enabled,
-                       transform, *, config: KeepoutConfig, index_ok=True):
+                       transform, *, config: KeepoutConfig, index_ok=True, axes=None):
   """KeepoutFilter::process for one robot's costmap (spec §4.3-§4.4).
 
   Args:
@@ -242,6 +290,7 @@ def _keepout_stack_one(cost, origin, res, stack, i, mask_origin, mask_res, state
     enabled: bool [].
     transform: float32 [3] T_mask_from_global (x, y, yaw), or None for the same frame.
     config: static KeepoutConfig.
+    axes: (private) this robot's `_se2_axes_one`, when the caller already formed them.
 
   Returns:
     (new cost uint8 [H, W], new state).
@@ -255,18 +304,14 @@ def _keepout_stack_one(cost, origin, res, stack, i, mask_origin, mask_res, state
   min_i, min_j, max_i, max_j = window[0], window[1], window[2], window[3]
   cols = jnp.arange(w, dtype=jnp.int32)
   rows = jnp.arange(h, dtype=jnp.int32)
-  if transform is None:
+  if transform is None and axes is None:
     overlap, (x0, y0, x1, y1) = _same_frame_window((hm, wm), mask_origin, mask_res, origin, res, window)
     (mx, vx), (my, vy) = geometry.centres_to_cells_2d((h, w), origin, res, mask_origin, mask_res, (hm, wm))
     visit = (((cols >= x0) & (cols < x1) & vx)[None, :] & ((rows >= y0) & (rows < y1) & vy)[:, None])
     mask_val = flat[base + my[:, None] * wm + mx[None, :]]
   else:
     overlap = jnp.asarray(True)
-    o = sum(geometry._as_terms(origin)[1:], geometry._as_terms(origin)[0])
-    r = sum(geometry._as_terms(res)[1:], geometry._as_terms(res)[0])
-    cx = o[0] + (cols.astype(_F32) + 0.5) * r
-    cy = o[1] + (rows.astype(_F32) + 0.5) * r
-    px, py = geometry.transform_points(transform, cx[None, :], cy[:, None])
+    px, py = _se2_grid(_se2_axes_one(origin, res, transform, h, w) if axes is None else axes)
     mx, my, inside = geometry.world_to_cell(px, py, mask_origin, mask_res, wm, hm)
     in_window = (((cols >= min_i) & (cols < max_i))[None, :] & ((rows >= min_j) & (rows < max_j))[:, None])
     visit = inside & in_window
@@ -283,8 +328,195 @@ def _keepout_stack_one(cost, origin, res, stack, i, mask_origin, mask_res, state
   return new_cost, _with_error(_processed(state, run), ~jnp.asarray(index_ok))
 
 
-keepout_one.__doc__ = ("KeepoutFilter::process for one robot and one mask `data` [Hm, Wm] (the per-robot "
-                       "kernel; see `_keepout_stack_one` for the arguments).\n\n" + _keepout_stack_one.__doc__)
+keepout_one.__doc__ = _keepout_stack_one.__doc__
+
+
+def _window_flags(w, h, x0, y0, x1, y1, run):
+  """col_ok bool [W], row_ok bool [H] of a half-open window; rows all False when not run."""
+  cols = jnp.arange(w, dtype=jnp.int32)
+  rows = jnp.arange(h, dtype=jnp.int32)
+  return (cols >= x0) & (cols < x1), (rows >= y0) & (rows < y1) & run
+
+
+def _mask_cost_u8(d):
+  """int8 mask values -> (known bool, cost uint8) in integer arithmetic (no table).
+
+  Known are 0..100 (a byte <= 100 once read as uint8); their cost round(2.54 d) is
+  2 d + ((553 d + 511) >> 10), checked for every d in 0..100 by
+  tests/test_keepout_paths.py against `occ_to_cost`. Unknown bytes give garbage costs
+  that `known` masks.
+  """
+  u = jax.lax.bitcast_convert_type(d, jnp.uint8)
+  known = u <= jnp.uint8(100)
+  d16 = u.astype(jnp.uint16)
+  cost = (d16 * jnp.uint16(2) + ((d16 * jnp.uint16(553) + jnp.uint16(511)) >> jnp.uint16(10))).astype(jnp.uint8)
+  return known, cost
+
+
+def _write_u8(cost, d, visit, state, config):
+  """Nav2's per-cell rule (spec §4.4) on int8 mask values d where `visit`, in uint8 arithmetic.
+
+  With c1 = cost + 1 and m1 = mask cost + 1 (0 where unknown or not visited), both
+  wrapping 255 to 0, `mask != 255 and (mask > old or old == 255)` is `m1 > c1` and
+  the written value max(c1, m1) - 1 (see `_aligned_one`).
+  """
+  known, mc = _mask_cost_u8(d)
+  m1 = jnp.where(visit & known, mc + jnp.uint8(1), jnp.uint8(0))
+  c1 = cost + jnp.uint8(1)
+  if config.override_lethal_cost:
+    value = jnp.where(state.is_pose_lethal, jnp.uint8(config.lethal_override_cost), m1 - jnp.uint8(1))
+    return jnp.where(m1 > c1, value, cost)
+  return jnp.maximum(c1, m1) - jnp.uint8(1)
+
+
+# ----------------------------------------------------------------------------- same frame, fast
+#
+# Same frame, the mask column of master column i depends on i alone (and the row on j):
+# two exact index vectors per robot, [W] and [H], decide every cell. Their exact division
+# costs a few hundred float32 operations per entry, so the fast path brackets each entry
+# with `geometry.centre_floor_bracket` (a dozen operations) and uses the exact division
+# only for a robot with an entry the bracket leaves open. When both vectors are
+# consecutive (k0 + i: same resolution in practice, a float32 mask resolution against
+# the costmap's double, or equal) the mask cells are one [H, W] slice of the mask padded
+# with unknown cells; otherwise they are gathered through the two vectors.
+
+
+def _axis_cells(shape, origin, res, mask_origin, mask_res, mshape):
+  """The per-column and per-row mask cells, bracketed: (((mx, vx), (my, vy)), all_known).
+
+  Entries are exact where `all_known` (bool []) is True; the caller falls back to
+  `geometry.centres_to_cells_2d` (same integers) where it is False.
+  """
+  h, w = shape
+  hm, wm = mshape
+  n = max(h, w)
+  i = jnp.arange(n, dtype=_F32)
+  per_axis = lambda o: jnp.stack([jnp.full((n,), o[0], _F32), jnp.full((n,), o[1], _F32)])
+  lo, hi = geometry.centre_floor_bracket(jnp.stack([i, i]), [per_axis(t) for t in geometry._as_terms(origin)],
+                                         geometry._as_terms(res),
+                                         [per_axis(t) for t in geometry._as_terms(mask_origin)], mask_res)
+  size = jnp.asarray([[wm], [hm]], _F32)
+  known = (lo == hi) | (hi < 0) | (lo >= size)          # an exact floor, or surely off the mask
+  cells = jnp.clip(jnp.where(known, lo, 0.0), 0, size - 1).astype(jnp.int32)
+  valid = (lo >= 0) & (lo < size)
+  all_known = jnp.all(known[0, :w]) & jnp.all(known[1, :h])
+  return ((cells[0, :w], valid[0, :w]), (cells[1, :h], valid[1, :h])), all_known
+
+
+def _exact_axis_cells(shape, origin, res, mask_origin, mask_res, mshape):
+  """`geometry.centres_to_cells_2d` (rolled expansions: a fallback, so compile time counts more)."""
+  return geometry.centres_to_cells_2d(shape, origin, res, mask_origin, mask_res, mshape,
+                                      sign_fn=geometry.expansion_sign_rolled)
+
+
+def _consecutive(cells, valid, size):
+  """(k0 int32, ok bool): ok when entry i's mask cell is k0 + i wherever that lies on the mask.
+
+  Then `valid` is exactly 0 <= k0 + i < size, so a slice starting at k0 of the mask
+  padded with unknown cells reads the same cells as the gather.
+  """
+  n = cells.shape[0]
+  i = jnp.arange(n, dtype=jnp.int32)
+  first = jnp.argmax(valid)
+  k0 = jnp.where(jnp.any(valid), cells[first] - first, -n)
+  k = k0 + i
+  ok = jnp.all(valid == ((k >= 0) & (k < size))) & jnp.all(~valid | (cells == k))
+  return k0, ok
+
+
+def _slice_start(k0, n, size):
+  """Start of a window of n entries in an axis padded by n on each side (clipped: all padding)."""
+  return jnp.clip(k0, -n, size) + n
+
+
+def _same_frame_window_fast(shape_m, mask_origin, mask_res, origin, res, window):
+  """`_same_frame_window` from float32 estimates: (overlap, (x0, y0, x1, y1), known bool []).
+
+  Each of the four worldToMapNoBounds quotients (w - o) / res, w = mask origin +
+  (0 or size) mask_res + half a mask cell, is bracketed (`geometry.quotient_bracket`;
+  the costmap resolution's lower parts enter the error as a relative term). The
+  result equals `_same_frame_window`'s where `known`: where the bracket's ends give
+  the same overlap and clipped window.
+  """
+  hm, wm = shape_m
+  four = lambda o: jnp.stack([o[0], o[1], o[0], o[1]])
+  mo = [four(t) for t in geometry._as_terms(mask_origin)]
+  o = [four(t) for t in geometry._as_terms(origin)]
+  r = geometry._as_terms(res)
+  u = 2.0 ** -24
+  e = jnp.asarray([0.0, 0.0, wm, hm], _F32) * mask_res
+  c1 = mo[0] + e
+  c2 = c1 + 0.5 * mask_res
+  c = c2 - o[0]
+  err = u * (jnp.abs(e) + jnp.abs(c1) + jnp.abs(c2) + jnp.abs(c))
+  for t in mo[1:] + o[1:]:
+    err = err + jnp.abs(t)
+  rel = sum((jnp.abs(t) for t in r[1:]), jnp.zeros((), _F32)) / r[0]
+  err = err + 2.0 * rel * (jnp.abs(c) + err)
+  lo, hi = geometry.quotient_bracket(c, err, r[0])
+  ok = jnp.all(jnp.isfinite(lo) & jnp.isfinite(hi) & (jnp.abs(lo) < 2.0 ** 30) & (jnp.abs(hi) < 2.0 ** 30))
+  ok = ok & (rel < 2.0 ** -8)
+  glo = jnp.where(ok, jnp.trunc(lo), 0.0).astype(jnp.int32)
+  ghi = jnp.where(ok, jnp.trunc(hi), 0.0).astype(jnp.int32)
+  min_i, min_j, max_i, max_j = window[0], window[1], window[2], window[3]
+
+  def clip(g0, g1):
+    overlap = ~((g0[0] >= max_i) | (g0[1] >= max_j)) & ~((g1[2] <= min_i) | (g1[3] <= min_j))
+    return overlap, (jnp.maximum(min_i, g0[0]), jnp.maximum(min_j, g0[1]),
+                     jnp.minimum(max_i, g1[2]), jnp.minimum(max_j, g1[3]))
+
+  # Every result is monotone in each quotient (the overlap falls with the lower corner
+  # and rises with the upper one, the clipped bounds rise with theirs), so it is known
+  # where the bracket's two ends give the same value, even if a quotient is not: a
+  # window that lies inside the mask does not need the mask's corners exactly.
+  overlap_lo, box_lo = clip(ghi, glo)
+  overlap_hi, box_hi = clip(glo, ghi)
+  same_box = jnp.all(jnp.stack(box_lo) == jnp.stack(box_hi))
+  known = ok & (overlap_lo == overlap_hi) & (~overlap_hi | same_box)
+  return overlap_hi, box_hi, known
+
+
+def _same_frame_prologue_one(shape, origin, res, mask_origin, mask_res, mshape, window, enabled, index_ok,
+                             *, part="both", exact=False):
+  """One robot's per-axis work: the index vectors and the window flags (`part` picks one or both).
+
+  Bracketed (`exact` False: every integer proven where its `known` flag is True) or
+  exact (the exact arithmetic throughout).
+
+  Returns:
+    cells ((mx, vx) int32/bool [W], (my, vy) [H]) and cells_known bool [], then flags
+    (col_ok [W], row_ok [H], run []) and flags_known bool [], as `part` asks.
+  """
+  h, w = shape
+  out = ()
+  if part in ("both", "cells"):
+    if exact:
+      out += (_exact_axis_cells((h, w), origin, res, mask_origin, mask_res, mshape), jnp.asarray(True))
+    else:
+      out += _axis_cells((h, w), origin, res, mask_origin, mask_res, mshape)
+  if part in ("both", "flags"):
+    if exact:
+      overlap, (x0, y0, x1, y1) = _same_frame_window(mshape, mask_origin, mask_res, origin, res, window)
+      known = jnp.asarray(True)
+    else:
+      overlap, (x0, y0, x1, y1), known = _same_frame_window_fast(mshape, mask_origin, mask_res, origin, res, window)
+    run = enabled & overlap & index_ok
+    out += (_window_flags(w, h, x0, y0, x1, y1, run) + (run,), known)
+  return out
+
+
+def _gather_write_one(cost, flat, i, mshape, mx, vx, my, vy, col_ok, row_ok, state, *, config: KeepoutConfig):
+  """The write rule on mask cells gathered through the two index vectors (uint8 [H, W])."""
+  hm, wm = mshape
+  d = flat[i * (hm * wm) + my[:, None] * wm + mx[None, :]]
+  return _write_u8(cost, d, (col_ok & vx)[None, :] & (row_ok & vy)[:, None], state, config)
+
+
+def _slice_write_one(cost, padded, i, sx, sy, col_ok, row_ok, state, *, config: KeepoutConfig):
+  """The write rule on one [H, W] slice of the masks padded with unknown (-1) cells (uint8 [H, W])."""
+  h, w = cost.shape
+  d = jax.lax.dynamic_slice(padded, (i, sy, sx), (1, h, w))[0]
+  return _write_u8(cost, d, col_ok[None, :] & row_ok[:, None], state, config)
 
 
 def mask_cost_plus_one_table() -> np.ndarray:
@@ -303,90 +535,34 @@ def _processed(state, run):
       state, last_pose_lethal=jnp.where(run, state.is_pose_lethal, state.last_pose_lethal))
 
 
-def _aligned_offsets(shape, origin, res, mask_origin, mask_res):
-  """Mask cells of the first and last master cell centres, per axis, decided exactly.
+def _aligned_one(cost, table, i, sx, sy, col_ok, row_ok, state, *, config: KeepoutConfig):
+  """The slice kernel on a (cost + 1) table (the GPU choice when W % 4 != 0).
 
-  Nav2 maps master cell k to mask cell floor((o + (k + 1/2) r - mo) / mr). The
-  offset floor(...) - k is monotone in k (its slope r / mr - 1 has one sign),
-  so it is the same for every k iff it is the same at k = 0 and k = size - 1:
-  then the mask cells under the costmap are the plain window starting at k0.
-  That holds whenever r == mr, and also for a double costmap resolution such
-  as 0.05 beside the float32 mask resolution 0.0500000007 unless a cell edge
-  falls between the two ends.
-
-  Returns:
-    (k0 int32 [2] (x, y) mask cell of master cell (0, 0), unit bool []).
-  """
-  h, w = shape
-  ends = jnp.asarray([[0.0, w - 1.0], [0.0, h - 1.0]], _F32)                     # [axis, end]
-  o = [t[:, None] for t in geometry._as_terms(origin)]
-  mo = [-t[:, None] for t in geometry._as_terms(mask_origin)]
-  k = geometry.floor_div_exact(geometry.cell_centre_terms(ends, o, res) + mo, mask_res)
-  unit = jnp.all((k[:, 1] - k[:, 0]) == jnp.asarray([w - 1, h - 1], jnp.int32))
-  return k[:, 0], unit
-
-
-def _aligned_slice(shape, padded_shape, origin, res, mask_origin, mask_res, window, enabled):
-  """Where a costmap's window starts in the padded mask table, and what it visits.
-
-  Only valid when `_aligned_offsets` says `unit` (the caller checks it).
-
-  Args:
-    shape: (H, W) of the costmap; padded_shape: (Hm + 2H, Wm + 2W) of the table.
-    origin, res, mask_origin, mask_res, window, enabled: as keepout_one.
-
-  Returns:
-    (sx, sy) int32 start of the [H, W] window in the table, col_ok bool [W],
-    row_ok bool [H] (False everywhere when the filter does not run), and run bool [].
-  """
-  h, w = shape
-  hm, wm = padded_shape[0] - 2 * h, padded_shape[1] - 2 * w
-  overlap, (x0, y0, x1, y1) = _same_frame_window((hm, wm), mask_origin, mask_res, origin, res, window)
-  k0, _ = _aligned_offsets(shape, origin, res, mask_origin, mask_res)
-  sx = jnp.clip(k0[0], -w, wm) + w
-  sy = jnp.clip(k0[1], -h, hm) + h
-  run = enabled & overlap
-  cols = jnp.arange(w, dtype=jnp.int32)
-  rows = jnp.arange(h, dtype=jnp.int32)
-  return sx, sy, (cols >= x0) & (cols < x1), (rows >= y0) & (rows < y1) & run, run
-
-
-def _aligned_one(cost, origin, res, table, i, mask_origin, mask_res, state, window, enabled,
-                 *, config: KeepoutConfig, index_ok=True):
-  """keepout_one for a costmap whose resolution equals the mask's (same frame).
-
-  With res == mask_res (as float32 values) the real quotient for master cell k
-  is (origin - mask_origin) / res + 0.5 + k, so its exact floor is k0 + k with
-  k0 the exact floor for k = 0 (one scalar `floor_div_exact` per axis), and the
-  cell is on the mask iff 0 <= k0 + k < size. The mask cells are then a plain
-  [H, W] window: a `dynamic_slice` of `table`, the mask's (cost + 1) bytes
-  padded by H rows and W columns of 0 (= unknown, never written), so windows
-  partly or wholly off the mask read 0 there.
+  With the mask cell of master cell (j, k) at (k0y + j, k0x + k) (`_consecutive`), the
+  mask cells are a plain [H, W] window: a `dynamic_slice` of `table`, the mask's
+  (cost + 1) bytes padded by H rows and W columns of 0 (= unknown, never written), so
+  windows partly or wholly off the mask read 0 there.
 
   In uint8 with wrap-around, c1 = cost + 1 and m1 = mask cost + 1 map 255 to 0,
   so Nav2's rule `mask != 255 and (mask > old or old == 255)` is `m1 > c1`,
   and the written value max(c1, m1) - 1.
 
   Args:
-    cost: uint8 [H, W]; origin [2], res []: the costmap.
-    table: uint8 [M, Hm + 2H, Wm + 2W] padded (cost + 1) masks; i: int32 [] the mask.
-    mask_origin, mask_res, state, window, enabled, config: as keepout_one.
+    cost: uint8 [H, W]. table: uint8 [M, Hm + 2H, Wm + 2W] padded (cost + 1) masks;
+    i: int32 [] the mask; (sx, sy): the window's start in the table; col_ok [W], row_ok [H].
+    state, config: as keepout_one.
 
   Returns:
-    (new cost uint8 [H, W], new state).
+    new cost uint8 [H, W].
   """
   h, w = cost.shape
-  sx, sy, col_ok, row_ok, run = _aligned_slice(cost.shape, table.shape[1:], origin, res, mask_origin,
-                                               mask_res, window, enabled & index_ok)
   m1 = jax.lax.dynamic_slice(table, (i, sy, sx), (1, h, w))[0]
   m1 = jnp.where(col_ok[None, :] & row_ok[:, None], m1, jnp.uint8(0))
   c1 = cost + jnp.uint8(1)
   if config.override_lethal_cost:
     value = jnp.where(state.is_pose_lethal, jnp.uint8(config.lethal_override_cost), m1 - jnp.uint8(1))
-    new_cost = jnp.where(m1 > c1, value, cost)
-  else:
-    new_cost = jnp.maximum(c1, m1) - jnp.uint8(1)
-  return new_cost, _with_error(_processed(state, run), ~jnp.asarray(index_ok))
+    return jnp.where(m1 > c1, value, cost)
+  return jnp.maximum(c1, m1) - jnp.uint8(1)
 
 
 # SWAR helpers: four uint8 cells per uint32 word, per-byte arithmetic without carries
@@ -439,12 +615,9 @@ def _shifted_words(table):
   return jnp.stack([_pack(table[:, :, s:s + 4 * q]) for s in range(4)])
 
 
-def _aligned_packed_one(cost, origin, res, words, i, mask_origin, mask_res, state, window, enabled,
-                        *, config: KeepoutConfig, padded_shape, index_ok=True):
-  """`_aligned_one` on uint32 words: same slice arithmetic, SWAR write rule (W % 4 == 0)."""
+def _aligned_packed_one(cost, words, i, sx, sy, col_ok, row_ok, state, *, config: KeepoutConfig):
+  """`_aligned_one` on uint32 words: same slice, SWAR write rule (W % 4 == 0)."""
   h, w = cost.shape
-  sx, sy, col_ok, row_ok, run = _aligned_slice(cost.shape, padded_shape, origin, res, mask_origin,
-                                               mask_res, window, enabled & index_ok)
   m1 = jax.lax.dynamic_slice(words, (sx % 4, i, sy, sx // 4), (1, 1, h, w // 4))[0, 0]
   col_bytes = jnp.where(col_ok, jnp.uint8(0xFF), jnp.uint8(0))
   m1 = jnp.where(row_ok[:, None], m1 & _pack(col_bytes)[None, :], _u32(0))
@@ -455,8 +628,7 @@ def _aligned_packed_one(cost, origin, res, words, i, mask_origin, mask_res, stat
     value = jnp.where(state.is_pose_lethal, lethal, _bytes_minus_one(m1))
   else:
     value = _bytes_minus_one(m1)
-  new_cost = _unpack((c & ~write) | (value & write))
-  return new_cost, _with_error(_processed(state, run), ~jnp.asarray(index_ok))
+  return _unpack((c & ~write) | (value & write))
 
 
 def _robot_geometry(costmap: Costmap, mask: FilterMask):
@@ -468,48 +640,291 @@ def _mask_origin(mask: FilterMask, i):
   return geometry.origin_terms(mask.origin[i], None if mask.origin_lo is None else mask.origin_lo[i])
 
 
-def _aligned_batch(costmap, mask, idx, idx_ok, state, window, enabled, *, config: KeepoutConfig,
-                   loop: str = "auto", packed: bool | None = None):
-  """The same-resolution keepout over a fleet (`_aligned_one` per robot).
+def _tree_where(pick, a, b):
+  """Per-robot choice between two batched pytrees (pick bool [B])."""
+  return jax.tree.map(lambda x, y: jnp.where(pick.reshape(pick.shape + (1,) * (x.ndim - 1)), x, y), a, b)
 
-  `loop` "map" runs the robots with `lax.map` (each window a contiguous slice:
-  3.5x faster than the batched gather vmap makes of it on XLA:CPU), "vmap"
-  vectorises them (the GPU choice); "auto" picks "map" on the CPU backend.
-  `packed` processes four cells per uint32 word (needs W % 4 == 0); None picks
-  it off the CPU backend, where LLVM already vectorises the uint8 loop.
+
+def _same_frame_batch(costmap, mask, idx, idx_ok, state, window, enabled, *, config: KeepoutConfig,
+                      loop: str, packed: bool | None = None):
+  """The fast same-frame keepout over a fleet: same integers as the exact path.
+
+  The per-robot vector work (window clip, bracketed index vectors, the exact vectors
+  for robots that need them, the slice test) runs vectorised over the fleet; then
+  `loop` "map" runs the cells one robot after another with `lax.map` (each robot's
+  slice-or-gather choice a real branch, each slice contiguous: the CPU choice), "vmap"
+  vectorises them too (the GPU choice) and makes the choice once for the batch.
+  `packed` (vmap) runs the slice on four cells per uint32 word (needs W % 4 == 0);
+  None picks it off the CPU backend.
   """
-  h, w = costmap.cost.shape[1:]
-  table = jnp.asarray(_COST1)[jax.lax.bitcast_convert_type(mask.data, jnp.uint8).astype(jnp.int32)]
-  table = jnp.pad(table, ((0, 0), (h, h), (w, w)))
-  on_cpu = jax.default_backend() == "cpu"
-  if loop == "auto":
-    loop = "map" if on_cpu else "vmap"
+  b, h, w = costmap.cost.shape
+  m, hm, wm = mask.data.shape
+  mshape = (hm, wm)
+  flat = mask.data.reshape(-1)
+  geo_axes = tuple(None if g is None else 0 for g in _robot_geometry(costmap, mask))
+  in_axes = (*geo_axes, 0, 0, 0, 0)
+  args = (*_robot_geometry(costmap, mask), idx, idx_ok, window, enabled)
+
+  def prologue(origin, origin_lo, res, res_lo, i, ok, win, en, *, part="both", exact=False):
+    return _same_frame_prologue_one((h, w), geometry.origin_terms(origin, origin_lo),
+                                    geometry.resolution_terms(res, res_lo), _mask_origin(mask, i),
+                                    mask.resolution[i], mshape, win, en, ok, part=part, exact=exact)
+
+  def exact(part):
+    return lambda a: jax.vmap(functools.partial(prologue, part=part, exact=True), in_axes=in_axes)(*a)[0]
+
+  # Robots whose bracket leaves an integer open redo that part exactly: the window clip
+  # (four quotients; often open when the grids line up, cheap) apart from the vectors.
+  cells, cells_known, flags, flags_known = jax.vmap(prologue, in_axes=in_axes)(*args)
+  (mx, vx), (my, vy) = _rerun(~cells_known, cells, exact("cells"), args, _rerun_capacity(b))
+  col_ok, row_ok, run = _rerun(~flags_known, flags, exact("flags"), args, max(8, b // 16))
+  new_state = _with_error(jax.vmap(_processed)(state, run), ~idx_ok)
+  k0x, okx = jax.vmap(_consecutive, in_axes=(0, 0, None))(mx, vx, wm)
+  k0y, oky = jax.vmap(_consecutive, in_axes=(0, 0, None))(my, vy, hm)
+  sx, sy = _slice_start(k0x, w, wm), _slice_start(k0y, h, hm)
+  sliced = okx & oky if config.aligned_fast_path else jnp.zeros((b,), bool)
+  gather = lambda c, i, mx, vx, my, vy, co, ro, st: _gather_write_one(c, flat, i, mshape, mx, vx, my, vy, co, ro,
+                                                                      st, config=config)
+  cells = (costmap.cost, idx, mx, vx, my, vy, col_ok, row_ok, state)
+
+  if loop == "map":
+    def all_sliced():
+      padded = jnp.pad(mask.data, ((0, 0), (h, h), (w, w)), constant_values=-1)
+      return jax.lax.map(lambda a: _slice_write_one(a[0], padded, *a[1:], config=config),
+                         (costmap.cost, idx, sx, sy, col_ok, row_ok, state))
+
+    def mixed():
+      padded = jnp.pad(mask.data, ((0, 0), (h, h), (w, w)), constant_values=-1)
+
+      def body(a):
+        c, i, mx, vx, my, vy, co, ro, st, x, y, sl = a
+        return jax.lax.cond(sl, lambda: _slice_write_one(c, padded, i, x, y, co, ro, st, config=config),
+                            lambda: gather(c, i, mx, vx, my, vy, co, ro, st))
+      return jax.lax.map(body, (*cells, sx, sy, sliced))
+
+    # A branch inside the loop costs a copy of every robot's result (2x for the slice on
+    # XLA:CPU), so a fleet that is sliced, or gathered, throughout runs a loop without one.
+    gather_all = lambda: jax.lax.map(lambda a: gather(*a), cells)
+    return jax.lax.cond(jnp.all(sliced), all_sliced,
+                        lambda: jax.lax.cond(jnp.any(sliced), mixed, gather_all)), new_state
+  if loop != "vmap":
+    raise ValueError(f"loop must be 'auto', 'map' or 'vmap'; got {loop!r}")
   if packed is None:
-    packed = not on_cpu and w % 4 == 0
+    packed = jax.default_backend() != "cpu" and w % 4 == 0
   if packed and w % 4:
     raise ValueError(f"the packed keepout path needs a costmap width divisible by 4; got W = {w}")
 
-  if packed:
-    words = _shifted_words(table)
+  def by_slice():
+    table = jnp.asarray(_COST1)[jax.lax.bitcast_convert_type(mask.data, jnp.uint8).astype(jnp.int32)]
+    table = jnp.pad(table, ((0, 0), (h, h), (w, w)))
+    if packed:
+      words = _shifted_words(table)
+      one = lambda c, i, x, y, co, ro, st: _aligned_packed_one(c, words, i, x, y, co, ro, st, config=config)
+    else:
+      one = lambda c, i, x, y, co, ro, st: _aligned_one(c, table, i, x, y, co, ro, st, config=config)
+    return jax.vmap(one)(costmap.cost, idx, sx, sy, col_ok, row_ok, state)
 
-    def one(cost, origin, origin_lo, res, res_lo, i, ok, st, win, en):
-      return _aligned_packed_one(cost, geometry.origin_terms(origin, origin_lo),
-                                 geometry.resolution_terms(res, res_lo), words, i,
-                                 _mask_origin(mask, i), mask.resolution[i], st, win, en, config=config,
-                                 padded_shape=table.shape[1:], index_ok=ok)
-  else:
-    def one(cost, origin, origin_lo, res, res_lo, i, ok, st, win, en):
-      return _aligned_one(cost, geometry.origin_terms(origin, origin_lo),
-                          geometry.resolution_terms(res, res_lo), table, i,
-                          _mask_origin(mask, i), mask.resolution[i], st, win, en, config=config,
-                          index_ok=ok)
+  return jax.lax.cond(jnp.all(sliced), by_slice, lambda: jax.vmap(gather)(*cells)), new_state
 
-  args = (costmap.cost, *_robot_geometry(costmap, mask), idx, idx_ok, state, window, enabled)
+
+# ----------------------------------------------------------------------------- other frame, fast
+#
+# With a transform each master cell's centre is rotated in float32 and mapped with an
+# exact floor. `geometry.world_to_cell_checked` decides that floor for every cell in
+# ~45 float32 operations (instead of several hundred) and proves it, leaving undecided
+# only centres within ~1e-13 relative of a mask-cell edge (in practice: exactly on one);
+# a robot with such a cell in its window runs the exact per-cell path.
+
+
+def _se2_codes_one(axes, i, mask_origin, mask_res, mshape, window, run):
+  """What the fast other-frame path decided per cell: int32 [H, W].
+
+  The flat index (into the [M * Hm * Wm] mask stack) of the cell's mask cell where it
+  is visited and proven on the mask, -1 where it is not visited or proven off the
+  mask, -2 where `geometry.world_to_cell_checked` left it undecided.
+  """
+  xc, ys = axes[0], axes[3]
+  h, w = ys.shape[0], xc.shape[0]
+  hm, wm = mshape
+  px, py = _se2_grid(axes)
+  index, inside, certain = geometry.world_to_index_checked(px, py, mask_origin, mask_res, wm, hm)
+  col_ok, row_ok = _window_flags(w, h, window[0], window[1], window[2], window[3], run)
+  visit = col_ok[None, :] & row_ok[:, None]
+  code = jnp.where(certain, jnp.where(inside, i * (hm * wm) + index, -1), -2)
+  return jnp.where(visit, code, -1)
+
+
+def _se2_write_one(cost, code, flat, state, *, config: KeepoutConfig):
+  """The write rule on `_se2_codes_one`'s cells: new cost uint8 [H, W]."""
+  d = flat[jnp.maximum(code, 0)]
+  return _write_u8(cost, d, code >= 0, state, config)
+
+
+def _rerun(need, fast, exact_fn, args, capacity):
+  """`fast` (a batched pytree) with the robots where `need` replaced by `exact_fn`'s results.
+
+  exact_fn maps batched args to batched results (one compiled copy). The robots that
+  need it are gathered `capacity` at a time, in a loop of as many turns as that takes
+  (none when no robot needs it); the last turn's spare slots redo robot 0 (or another
+  already redone), whose exact result is right either way.
+  """
+  b = need.shape[0]
+  count = jnp.sum(need.astype(jnp.int32))
+  order = jnp.nonzero(need, size=b + capacity, fill_value=0)[0]
+
+  def body(k, out):
+    if capacity == 1:   # in-place slices: a scatter would copy the whole batch each turn
+      r = order[k]
+      res = exact_fn(jax.tree.map(lambda a: jax.lax.dynamic_slice_in_dim(a, r, 1), args))
+      return jax.tree.map(lambda o, x: jax.lax.dynamic_update_slice_in_dim(o, x, r, 0), out, res)
+    sel = jax.lax.dynamic_slice(order, (k * capacity,), (capacity,))
+    res = exact_fn(jax.tree.map(lambda a: a[sel], args))
+    return jax.tree.map(lambda o, r: o.at[sel].set(r), out, res)
+
+  return jax.lax.fori_loop(0, (count + capacity - 1) // capacity, body, fast)
+
+
+def _rerun_capacity(b):
+  return min(b, max(8, b // 32))
+
+
+def _divisor_at_most(b, limit):
+  """The largest divisor of b that is <= max(limit, 1): lax.map chunks without a remainder
+  (a remainder chunk runs outside the loop, where XLA fuses it into the next pass)."""
+  return max(d for d in range(1, min(b, max(limit, 1)) + 1) if b % d == 0)
+
+
+_FIX_CELLS = 64   # undecided cells of one robot settled one by one before the whole window is redone
+
+
+def _se2_fix_one(new_cost, code, cost, axes, stack, i, mask_origin, mask_res, state, window, run, *,
+                 config: KeepoutConfig, mode: str = "auto"):
+  """Settles one robot's undecided cells (code -2) exactly: its final cost, uint8 [H, W].
+
+  `mode` "few" maps up to `_FIX_CELLS` of them with `geometry.world_to_cell` (the
+  exact path's arithmetic, on the same float32 points; padding slots redo cell 0,
+  whose exact result is right either way); "whole" reruns the robot's window with
+  `_keepout_stack_one`; "auto" picks "few" when it covers them all (a real branch on
+  the CPU loop; under vmap the batch code calls the modes apart).
+  """
+  h, w = cost.shape
+  hm, wm = stack.shape[1:]
+  undecided = (code == -2).reshape(-1)
+
+  def few():
+    sel = jnp.nonzero(undecided, size=_FIX_CELLS, fill_value=0)[0]
+    row, col = sel // w, sel % w
+    xc, xs, yc, ys, t = axes
+    px, py = (xc[col] - ys[row]) + t[0], (xs[col] + yc[row]) + t[1]
+    mx, my, inside = geometry.world_to_cell(px, py, mask_origin, mask_res, wm, hm)
+    col_ok, row_ok = _window_flags(w, h, window[0], window[1], window[2], window[3], run)
+    visit = inside & col_ok[col] & row_ok[row]
+    d = stack.reshape(-1)[i * (hm * wm) + my * wm + mx]
+    value = _write_u8(cost.reshape(-1)[sel], d, visit, state, config)
+    return new_cost.reshape(-1).at[sel].set(value).reshape(h, w)
+
+  def whole():
+    return _keepout_stack_one(cost, None, None, stack, i, mask_origin, mask_res, state, window, run, None,
+                              config=config, axes=axes)[0]
+
+  if mode == "few":
+    return few()
+  if mode == "whole":
+    return whole()
+  return jax.lax.cond(jnp.sum(undecided.astype(jnp.int32)) <= _FIX_CELLS, few, whole)
+
+
+def _se2_batch(costmap, mask, idx, idx_ok, state, window, enabled, transform, *, config: KeepoutConfig,
+               loop: str):
+  """The fast other-frame keepout over a fleet: same integers as the exact path.
+
+  Two passes: the cells' codes (`_se2_codes_one`, written out so that XLA does not
+  fuse the arithmetic into the gather, which runs it several times slower), then the
+  gather and the write rule. Robots with undecided cells are then settled by
+  `_se2_fix_one` (`_rerun`): one after another in a loop of as many turns as there
+  are such robots ("map"), or gathered and settled together ("vmap").
+  """
+  b, h, w = costmap.cost.shape
+  m, hm, wm = mask.data.shape
+  flat = mask.data.reshape(-1)
+  geo_axes = tuple(None if g is None else 0 for g in _robot_geometry(costmap, mask))
+
+  def axes_of(origin, origin_lo, res, res_lo, tf):
+    return _se2_axes_one(geometry.origin_terms(origin, origin_lo), geometry.resolution_terms(res, res_lo), tf,
+                         h, w)
+
+  axes = jax.vmap(axes_of, in_axes=(*geo_axes, 0))(*_robot_geometry(costmap, mask), transform)
+  run = enabled & idx_ok
+  new_state = _with_error(jax.vmap(_processed)(state, run), ~idx_ok)
+
+  def codes_one(a):
+    ax, i, win, rn = a
+    return _se2_codes_one(ax, i, _mask_origin(mask, i), mask.resolution[i], (hm, wm), win, rn)
+
+  def write(c, k, st):
+    return jax.vmap(lambda c, k, st: _se2_write_one(c, k, flat, st, config=config))(c, k, st)
+
+  def fix(new, code, old, ax, i, st, win, rn, mode="auto"):
+    return _se2_fix_one(new, code, old, ax, mask.data, i, _mask_origin(mask, i), mask.resolution[i], st, win, rn,
+                        config=config, mode=mode)
+
+  per_robot = (axes, idx, window, run)
   if loop == "map":
-    return jax.lax.map(lambda a: one(*a), args)
+    # Chunks of robots, each: codes robot by robot (an inner loop, so XLA writes them out),
+    # then gather and write. Every buffer stays a few MB: XLA:CPU maps fresh pages for
+    # buffers beyond glibc's 32 MB mmap threshold on every call (a 40 MB int32 code array
+    # cost 10,000 page faults, ~10 ms, per call).
+    cb = _divisor_at_most(b, max(2, (1 << 19) // (h * w)))
+    split = lambda x: x.reshape(b // cb, cb, *x.shape[1:])
+
+    def chunk(a):
+      pr, c, st = a
+      k = jax.lax.map(codes_one, pr)
+      return write(c, k, st), jnp.any(k == -2, axis=(1, 2))
+
+    cost, need = jax.lax.map(chunk, jax.tree.map(split, (per_robot, costmap.cost, state)))
+    cost, need = cost.reshape(b, h, w), need.reshape(b)
+
+    def settle(new, old, ax, i, st, win, rn):
+      return fix(new, codes_one((ax, i, win, rn)), old, ax, i, st, win, rn)
+    args = (cost, costmap.cost, axes, idx, state, window, run)
+    return _rerun(need, cost, lambda a: jax.vmap(settle)(*a), args, 1), new_state
   if loop != "vmap":
     raise ValueError(f"loop must be 'auto', 'map' or 'vmap'; got {loop!r}")
-  return jax.vmap(one)(*args)
+  chunk_cells = _PASS_CHUNK_CELLS_CPU if jax.default_backend() == "cpu" else _PASS_CHUNK_CELLS
+  codes = jax.lax.map(codes_one, per_robot, batch_size=_divisor_at_most(b, chunk_cells // (h * w)))
+  cost = write(costmap.cost, codes, state)
+  undecided = jnp.sum((codes == -2).astype(jnp.int32), axis=(1, 2))
+  many = undecided > _FIX_CELLS
+  args = (cost, codes, costmap.cost, axes, idx, state, window, run)
+  # Under vmap a branch runs both sides, so the few-cells and whole-window fixes are
+  # separate passes, each over the robots that need it.
+  few = functools.partial(fix, mode="few")
+  cost = _rerun((undecided > 0) & ~many, cost, lambda a: jax.vmap(few)(*a), args, _rerun_capacity(b))
+  args = (cost,) + args[1:]
+  whole = functools.partial(fix, mode="whole")
+  return _rerun(many, cost, lambda a: jax.vmap(whole)(*a), args, min(b, 8)), new_state
+
+
+def _general_batch(costmap, mask, idx, idx_ok, state, window, enabled, transform, *, config: KeepoutConfig):
+  """The exact per-cell path (`_keepout_stack_one`) over a fleet: the reference the fast paths equal."""
+  def one(cost, origin, origin_lo, res, res_lo, i, ok, st, win, en, tf):
+    return _keepout_stack_one(cost, geometry.origin_terms(origin, origin_lo),
+                              geometry.resolution_terms(res, res_lo), mask.data, i,
+                              _mask_origin(mask, i), mask.resolution[i], st, win, en, tf,
+                              config=config, index_ok=ok)
+
+  tf_axis = None if transform is None else 0
+  geo_axes = tuple(None if g is None else 0 for g in _robot_geometry(costmap, mask))
+  args = (costmap.cost, *_robot_geometry(costmap, mask), idx, idx_ok, state, window, enabled, transform)
+  b, h, w = costmap.cost.shape
+  # Only the SE2 path needs chunking: the same-frame gather fuses well and runs
+  # 2.4x faster as one vmap (H200: 172 vs 72 Gcell/s at B=16384, 200x200).
+  if transform is None or b * h * w <= _GENERAL_CHUNK_CELLS:
+    return jax.vmap(one, in_axes=(0, *geo_axes, 0, 0, 0, 0, 0, tf_axis))(*args)
+  # The per-cell exact arithmetic keeps ~40 float32 temporaries per cell alive at
+  # once (an SE2 fleet of 655 M cells asked XLA:GPU for 107 GiB): run in chunks.
+  return jax.lax.map(lambda a: one(*a), args, batch_size=max(1, _GENERAL_CHUNK_CELLS // (h * w)))
 
 
 def _batched_inputs(costmap, mask, poses, mask_index, enabled, window, transform, where):
@@ -578,40 +993,62 @@ def keepout_filter(costmap: Costmap, mask: FilterMask, poses, state: KeepoutStat
   return _keepout_filter_jit(costmap, mask, idx, idx_ok, state, window, enabled, transform, config=config)
 
 
-@functools.partial(jax.jit, static_argnames=("config",))
-def _keepout_filter_jit(costmap, mask, idx, idx_ok, state, window, enabled, transform, *, config):
+def _path_report(costmap: Costmap, mask: FilterMask, transform=None, mask_index=None) -> dict:
+  """How many robots each fast-path branch takes on these inputs (for benchmarks/NOTES.md).
+
+  Same frame: robots whose index vectors or window clip the bracket left open (they
+  run the exact arithmetic), and robots whose cells are read as one slice (among the
+  others). Other frame: robots with an undecided cell (settled exactly).
+  """
+  b, h, w = costmap.cost.shape
+  idx, ok, _, en, win, tf = _batched_inputs(costmap, mask, jnp.zeros((b, 3)), mask_index, None, None, transform,
+                                            "_path_report")
+  hm, wm = mask.data.shape[1:]
+  geo_axes = tuple(None if g is None else 0 for g in _robot_geometry(costmap, mask))
+
+  @jax.jit
+  def same_frame(origin, origin_lo, res, res_lo, i, ok, win, en):
+    def one(origin, origin_lo, res, res_lo, i, ok, win, en):
+      o, r = geometry.origin_terms(origin, origin_lo), geometry.resolution_terms(res, res_lo)
+      ((mx, vx), (my, vy)), known, _, wknown = _same_frame_prologue_one(
+          (h, w), o, r, _mask_origin(mask, i), mask.resolution[i], (hm, wm), win, en, ok)
+      return known, wknown, _consecutive(mx, vx, wm)[1] & _consecutive(my, vy, hm)[1]
+    return jax.vmap(one, in_axes=(*geo_axes, 0, 0, 0, 0))(origin, origin_lo, res, res_lo, i, ok, win, en)
+
+  @jax.jit
+  def other_frame(origin, origin_lo, res, res_lo, i, win, tf):
+    def one(origin, origin_lo, res, res_lo, i, win, tf):
+      axes = _se2_axes_one(geometry.origin_terms(origin, origin_lo), geometry.resolution_terms(res, res_lo), tf, h, w)
+      code = _se2_codes_one(axes, i, _mask_origin(mask, i), mask.resolution[i], (hm, wm), win, True)
+      return jnp.any(code == -2)
+    return jax.vmap(one, in_axes=(*geo_axes, 0, 0, 0))(origin, origin_lo, res, res_lo, i, win, tf)
+
+  if tf is None:
+    known, wknown, sliced = same_frame(*_robot_geometry(costmap, mask), idx, ok, win, en)
+    return dict(robots=b, exact_vectors=int(jnp.sum(~known)), exact_window=int(jnp.sum(~wknown)),
+                sliced=int(jnp.sum(known & sliced)))
+  undecided = other_frame(*_robot_geometry(costmap, mask), idx, win, tf)
+  return dict(robots=b, robots_with_undecided_cells=int(jnp.sum(undecided)))
+
+
+@functools.partial(jax.jit, static_argnames=("config", "exact", "loop"))
+def _keepout_filter_jit(costmap, mask, idx, idx_ok, state, window, enabled, transform, *, config,
+                        exact=False, loop="auto"):
+  """The batch behind `keepout_filter`. `exact` (tests) runs only the per-cell exact path;
+  `loop` "auto" picks `lax.map` over robots on the CPU backend and `vmap` elsewhere."""
   with jax.named_scope("keepout_filter"):
-    def one(cost, origin, origin_lo, res, res_lo, i, ok, st, win, en, tf):
-      return _keepout_stack_one(cost, geometry.origin_terms(origin, origin_lo),
-                                geometry.resolution_terms(res, res_lo), mask.data, i,
-                                _mask_origin(mask, i), mask.resolution[i], st, win, en, tf,
-                                config=config, index_ok=ok)
-
-    tf_axis = None if transform is None else 0
-    geo_axes = tuple(None if g is None else 0 for g in _robot_geometry(costmap, mask))
-
-    def general(state):
-      args = (costmap.cost, *_robot_geometry(costmap, mask), idx, idx_ok, state, window, enabled, transform)
-      b, h, w = costmap.cost.shape
-      # Only the SE2 path needs chunking: the same-frame gather fuses well and runs
-      # 2.4x faster as one vmap (H200: 172 vs 72 Gcell/s at B=16384, 200x200).
-      if transform is None or b * h * w <= _GENERAL_CHUNK_CELLS:
-        return jax.vmap(one, in_axes=(0, *geo_axes, 0, 0, 0, 0, 0, tf_axis))(*args)
-      # The per-cell exact arithmetic keeps ~40 float32 temporaries per cell alive at
-      # once (an SE2 fleet of 655 M cells asked XLA:GPU for 107 GiB): run in chunks.
-      return jax.lax.map(lambda a: one(*a), args, batch_size=max(1, _GENERAL_CHUNK_CELLS // (h * w)))
-
-    if transform is None and config.aligned_fast_path:
-      def unit_stride(origin, origin_lo, res, res_lo, i):
-        return _aligned_offsets(costmap.cost.shape[1:], geometry.origin_terms(origin, origin_lo),
-                                geometry.resolution_terms(res, res_lo), _mask_origin(mask, i),
-                                mask.resolution[i])[1]
-      aligned = jnp.all(jax.vmap(unit_stride, in_axes=(*geo_axes, 0))(*_robot_geometry(costmap, mask), idx))
-      cost, new_state = jax.lax.cond(
-          aligned, lambda st: _aligned_batch(costmap, mask, idx, idx_ok, st, window, enabled, config=config),
-          general, state)
+    if loop == "auto":
+      loop = "map" if jax.default_backend() == "cpu" else "vmap"
+    hm, wm = mask.data.shape[1:]
+    if exact or (transform is not None and (max(hm, wm) > 2 ** 17 or hm * wm >= 2 ** 24)):
+      cost, new_state = _general_batch(costmap, mask, idx, idx_ok, state, window, enabled, transform,
+                                       config=config)
+    elif transform is None:
+      cost, new_state = _same_frame_batch(costmap, mask, idx, idx_ok, state, window, enabled, config=config,
+                                          loop=loop)
     else:
-      cost, new_state = general(state)
+      cost, new_state = _se2_batch(costmap, mask, idx, idx_ok, state, window, enabled, transform,
+                                   config=config, loop=loop)
     return dataclasses.replace(costmap, cost=cost), new_state
 
 

@@ -1,8 +1,11 @@
-"""Fast paths give the same integers as the general keepout path on random inputs.
+"""Fast paths give the same integers as the exact per-cell keepout path on random inputs.
 
-`KeepoutConfig(aligned_fast_path=True)` (the default) lets `keepout_filter` take
-the same-resolution slice path; `aligned_fast_path=False` always runs the
-general gather path. Both must agree bit for bit, with both batch loops.
+`keepout_filter` runs the fast paths (the same-frame slice where a robot's mask
+cells are consecutive, with `KeepoutConfig(aligned_fast_path=True)`, the default;
+otherwise a separable gather; the bracketed other-frame path with a transform);
+`_keepout_filter_jit(exact=True)` runs the exact per-cell path on every cell. They
+must agree bit for bit, with both batch loops. tests/test_keepout_paths.py puts
+cell centres on mask-cell edges; these fleets are random.
 """
 
 import dataclasses
@@ -46,11 +49,12 @@ def _fleet(seed, *, same_res=True, num_masks=1):
   return cm, mask, state, window, mask_index, enabled
 
 
-def _run(cm, mask, state, window, mask_index, enabled, config):
-  f = jax.jit(lambda cm, mask, st, win, en: ko.keepout_filter(
-      cm, mask, jnp.zeros((B, 3)), st, window=win, enabled=en, config=config,
-      mask_index=None if mask_index is None else jnp.asarray(mask_index)))
-  out, st = f(cm, mask, state, jnp.asarray(window), enabled)
+def _run(cm, mask, state, window, mask_index, enabled, config, *, exact=False, loop="auto", transform=None):
+  # One module-level jitted program per (config, exact, loop, shapes): no compile per call.
+  idx, ok, _, en, win, tf = ko._batched_inputs(cm, mask, jnp.zeros((B, 3)), mask_index, enabled, jnp.asarray(window),
+                                               transform, "test")
+  out, st = ko._keepout_filter_jit(cm, mask, idx, ok, ko._fill_error(state, B), win, en, tf, config=config,
+                                   exact=exact, loop=loop)
   return np.asarray(out.cost), np.asarray(st.last_pose_lethal)
 
 
@@ -60,11 +64,12 @@ CONFIGS = [ko.KeepoutConfig(), ko.KeepoutConfig(override_lethal_cost=True, letha
 @pytest.mark.parametrize("seed", range(10))
 @pytest.mark.parametrize("cfg", CONFIGS, ids=["plain", "override"])
 def test_aligned_fast_path_equals_general_path(seed, cfg):
-  case = _fleet(seed, num_masks=1 + seed % 3)
-  fast = _run(*case, cfg)
-  slow = _run(*case, dataclasses.replace(cfg, aligned_fast_path=False))
-  np.testing.assert_array_equal(fast[0], slow[0])
-  np.testing.assert_array_equal(fast[1], slow[1])
+  case = _fleet(seed, num_masks=1 + 2 * (seed % 2))
+  exact = _run(*case, cfg, exact=True)
+  for aligned in (True, False):
+    fast = _run(*case, dataclasses.replace(cfg, aligned_fast_path=aligned))
+    np.testing.assert_array_equal(fast[0], exact[0])
+    np.testing.assert_array_equal(fast[1], exact[1])
 
 
 @pytest.mark.parametrize("seed", range(4))
@@ -80,25 +85,40 @@ def test_fast_path_matches_float64_reference(seed):
     np.testing.assert_array_equal(got[b], want)
 
 
-@pytest.mark.parametrize("loop,packed", [("map", False), ("vmap", False), ("map", True), ("vmap", True)])
+@pytest.mark.parametrize("loop,packed", [("map", None), ("vmap", False), ("vmap", True)])
 @pytest.mark.parametrize("seed", range(4))
 def test_both_batch_loops_agree(seed, loop, packed):
-  cm, mask, state, window, mask_index, enabled = _fleet(200 + seed, num_masks=2)
+  cm, mask, state, window, mask_index, enabled = _fleet(200 + seed, num_masks=3)
   cfg = ko.KeepoutConfig(override_lethal_cost=bool(seed % 2), lethal_override_cost=100)
-  idx = jnp.asarray(mask_index)
-  win = jnp.asarray(window)
-  cost, st = jax.jit(lambda c, s: ko._aligned_batch(c, mask, idx, jnp.ones_like(idx, bool), s, win, enabled, config=cfg, loop=loop, packed=packed))(cm, state)
-  want = _run(cm, mask, state, window, mask_index, enabled, dataclasses.replace(cfg, aligned_fast_path=False))
+  idx, ok, _, en, win, _ = ko._batched_inputs(cm, mask, jnp.zeros((B, 3)), mask_index, enabled, jnp.asarray(window),
+                                              None, "test")
+  state = ko._fill_error(state, B)
+  cost, st = _same_frame(cm, mask, idx, ok, state, win, en, config=cfg, loop=loop, packed=packed)
+  want = _run(cm, mask, state, window, mask_index, enabled, cfg, exact=True)
   np.testing.assert_array_equal(np.asarray(cost), want[0])
   np.testing.assert_array_equal(np.asarray(st.last_pose_lethal), want[1])
+
+
+_same_frame = jax.jit(ko._same_frame_batch, static_argnames=("config", "loop", "packed"))
 
 
 @pytest.mark.parametrize("seed", range(3))
 def test_mixed_resolutions_fall_back_to_general_path(seed):
   case = _fleet(300 + seed, same_res=False)
   fast = _run(*case, ko.KeepoutConfig())
-  slow = _run(*case, ko.KeepoutConfig(aligned_fast_path=False))
+  slow = _run(*case, ko.KeepoutConfig(), exact=True)
   np.testing.assert_array_equal(fast[0], slow[0])
+
+
+@pytest.mark.parametrize("seed", range(3))
+def test_other_frame_fast_path_equals_exact_path(seed):
+  case = _fleet(500 + seed, same_res=bool(seed % 2), num_masks=3)
+  tf = jnp.asarray(np.float32(np.random.default_rng(seed).uniform(-1, 1, (B, 3))))
+  for loop in ("map", "vmap"):
+    fast = _run(*case, ko.KeepoutConfig(), loop=loop, transform=tf)
+    slow = _run(*case, ko.KeepoutConfig(), exact=True, transform=tf)
+    np.testing.assert_array_equal(fast[0], slow[0])
+    np.testing.assert_array_equal(fast[1], slow[1])
 
 
 def test_cost_plus_one_table_is_occ_to_cost_plus_one():
@@ -107,12 +127,15 @@ def test_cost_plus_one_table_is_occ_to_cost_plus_one():
   np.testing.assert_array_equal(ko.mask_cost_plus_one_table(), want)
 
 
-@pytest.mark.parametrize("transform", [True])
-def test_chunked_general_path_equals_one_vmap(monkeypatch, transform):
+def test_chunked_general_path_equals_one_vmap(monkeypatch):
   cm, mask, state, window, mask_index, enabled = _fleet(400, same_res=False)
-  tf = jnp.asarray(np.float32(np.random.default_rng(1).uniform(-1, 1, (B, 3)))) if transform else None
-  run = lambda: np.asarray(ko.keepout_filter(cm, mask, jnp.zeros((B, 3)), state, window=jnp.asarray(window),
-                                             enabled=enabled, transform=tf)[0].cost)
+  tf = jnp.asarray(np.float32(np.random.default_rng(1).uniform(-1, 1, (B, 3))))
+  idx, ok, _, en, win, tf = ko._batched_inputs(cm, mask, jnp.zeros((B, 3)), None, enabled, jnp.asarray(window), tf,
+                                               "test")
+  state = ko._fill_error(state, B)
+  # A fresh jit per run: the chunk size is read when the program is traced.
+  run = lambda: np.asarray(jax.jit(lambda c, s: ko._general_batch(dataclasses.replace(cm, cost=c), mask, idx, ok, s, win, en, tf,
+                                                                  config=ko.KeepoutConfig())[0])(cm.cost, state))
   whole = run()
   monkeypatch.setattr(ko, "_GENERAL_CHUNK_CELLS", 2 * H * W)  # chunks of 2 robots, one remainder
   np.testing.assert_array_equal(run(), whole)

@@ -1,0 +1,346 @@
+"""The fast keepout paths give the exact path's integers, on cell edges too.
+
+`keepout_filter` decides same-frame cells through bracketed index vectors (a slice
+where they are consecutive) and other-frame cells through `world_to_index_checked`,
+falling back to the exact arithmetic where a bracket stays open. These tests compare
+the fast paths (both batch loops, plain and escape mode) with the per-cell exact path
+(`_keepout_filter_jit(exact=True)`) on fleets built to put cell centres exactly on
+mask-cell edges and one ulp either side, as well as at random; the exact path and the
+other-frame semantics (float32 rotation with rounded products, then the exact floor)
+against independent references (tests/reference.py in float64, and a NumPy float32
+rotation with Fractions); and the new geometry helpers against Fractions with
+hypothesis.
+"""
+
+import dataclasses
+import math
+from fractions import Fraction
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+import pytest
+from hypothesis import given, strategies as st
+
+from jaxfilters import geometry
+from jaxfilters import keepout as ko
+from jaxfilters import validate
+from jaxfilters.grid import OccupancyGrid
+from jaxfilters.types import Costmap, FilterInfo, FilterMask
+from tests import reference
+
+KEEPOUT = FilterInfo.create(0)
+B, H, W, M, HM, WM = 6, 12, 16, 2, 20, 18       # one shape: each path compiles once
+PLAIN = ko.KeepoutConfig()
+ESCAPE = ko.KeepoutConfig(override_lethal_cost=True, lethal_override_cost=200)
+f32 = np.float32
+
+
+# ----------------------------------------------------------------------------- helpers
+
+
+def _run(cm, mask, state, window, mask_index, enabled, transform, config, **kw):
+  idx, ok, _, en, win, tf = ko._batched_inputs(cm, mask, jnp.zeros((B, 3)), mask_index, enabled, window,
+                                               transform, "test")
+  cost, st = ko._keepout_filter_jit(cm, mask, idx, ok, ko._fill_error(state, B), win, en, tf, config=config, **kw)
+  return np.asarray(cost.cost), np.asarray(st.last_pose_lethal)
+
+
+def _fast_equals_exact(case, transform=None, configs=(PLAIN, ESCAPE), loops=("map", "vmap")):
+  for cfg in configs:
+    want = _run(*case, transform, cfg, exact=True)
+    for loop in (loops if cfg is PLAIN else ("map",)):
+      got = _run(*case, transform, cfg, loop=loop)
+      np.testing.assert_array_equal(got[0], want[0], err_msg=f"{cfg} {loop}")
+      np.testing.assert_array_equal(got[1], want[1], err_msg=f"{cfg} {loop}")
+  return want[0]
+
+
+def _fleet(rng, res, mres, origins, mask_origins, *, windows=None):
+  """B costmaps at `origins` [B, 2] (float64), M masks at `mask_origins` [M, 2]."""
+  data = rng.choice([-1, 0, 0, 1, 25, 50, 75, 99, 100, 100, 101, -128], (M, HM, WM)).astype(np.int8)
+  grids = [OccupancyGrid.create(np.clip(d, -1, 100), float(mres), tuple(o)) for d, o in zip(data, mask_origins)]
+  mask = FilterMask.create(grids, KEEPOUT).with_data(data)
+  cost = rng.choice([0, 0, 10, 100, 200, 252, 253, 254, 255], (B, H, W)).astype(np.uint8)
+  cm = Costmap.create(cost, np.asarray(origins, np.float64), res)
+  if windows is None:
+    x0, y0 = rng.integers(-2, W // 2, B), rng.integers(-2, H // 2, B)
+    windows = np.stack([x0, y0, x0 + rng.integers(1, W + 3, B), y0 + rng.integers(1, H + 3, B)], 1)
+    windows[0] = (0, 0, W, H)
+  state = dataclasses.replace(ko.KeepoutState.create(B), is_pose_lethal=jnp.asarray(rng.random(B) < 0.5))
+  enabled = jnp.asarray(rng.random(B) < 0.9).at[0].set(True)
+  return cm, mask, state, np.asarray(windows, np.int32), rng.integers(0, M, B).astype(np.int32), enabled
+
+
+def _nudge(x, steps):
+  """x moved by `steps` float32 ulps (negative: down)."""
+  x = np.float32(x)
+  for _ in range(abs(steps)):
+    x = np.nextafter(x, np.float32(np.inf if steps > 0 else -np.inf))
+  return x
+
+
+# ----------------------------------------------------------------------------- helpers of geometry
+
+
+def test_mask_cost_u8_is_occ_to_cost_for_every_byte():
+  d = np.arange(256, dtype=np.uint8).view(np.int8)
+  known, cost = ko._mask_cost_u8(jnp.asarray(d))
+  want = np.asarray(ko.occ_to_cost(jnp.asarray(d)))
+  assert np.array_equal(np.asarray(known), want != 255)
+  assert np.array_equal(np.asarray(cost)[np.asarray(known)], want[want != 255])
+  assert [reference.mask_cost(v) for v in range(101)] == np.asarray(cost)[:101].tolist()
+
+
+finite32 = st.floats(-1e4, 1e4, width=32, allow_nan=False).filter(lambda v: v == 0 or abs(v) >= 1e-30)
+
+
+_signs = jax.jit(lambda t: (geometry.expansion_sign_rolled(list(t)), geometry.expansion_sign(list(t))))
+
+
+@given(st.lists(finite32, min_size=2, max_size=9), st.integers(0, 8))
+def test_expansion_sign_rolled_equals_unrolled(values, cancel):
+  # Cancelling pairs and exact sums of 0 make the sign hinge on the smallest parts.
+  terms = list(np.float32(values)) + [-np.float32(v) for v in values[:cancel]]
+  padded = np.zeros(18, np.float32)
+  padded[:len(terms)] = terms
+  got, want = (int(v) for v in _signs(jnp.asarray(padded)))
+  exact = sum(Fraction(float(t)) for t in terms)
+  assert got == want == (exact > 0) - (exact < 0)
+
+
+def _exact_floor(x, origin_parts, res):
+  return math.floor((Fraction(float(x)) - sum(Fraction(float(p)) for p in origin_parts)) / Fraction(float(res)))
+
+
+_checked = jax.jit(lambda x, o, r, size: geometry.floor_div_checked(x, [o[0], o[1], o[2]], r, size),
+                   static_argnames="size")
+_checked_big = jax.jit(lambda x, o, r: geometry.floor_div_checked(x, [o[0], o[1], o[2]], r, 60000))
+
+resolutions = st.sampled_from([0.05, 0.1, 0.025, 0.03, 1.0, 0.25]) | st.floats(0.004, 3.0)
+coords = lambda m: st.floats(-m, m).filter(lambda v: v == 0 or abs(v) >= 1e-20)   # host doubles
+
+
+@given(coords(300.0), resolutions, st.integers(-30, 4100), st.sampled_from([-2, -1, 0, 1, 2, None]),
+       st.floats(0.0, 1.0), st.booleans())
+def test_floor_div_checked_is_exact_where_certain(origin, res, k, nudge, frac, big):
+  # Points on a cell edge o + k r (rounded to float32), a few ulps either side, or inside a cell.
+  o = validate.split_float64(origin)
+  r = f32(res)
+  edge = float(origin) + k * float(r)
+  x = f32(edge + frac * float(r)) if nudge is None else _nudge(f32(edge), nudge)
+  size = 4000
+  run = _checked_big if big else (lambda x, o, r: _checked(x, o, r, size=size))
+  cell, inside, certain = (np.asarray(v) for v in run(jnp.float32(x), jnp.asarray(o), jnp.float32(r)))
+  want = _exact_floor(x, o, r)
+  limit = 60000 if big else size
+  if certain:
+    assert bool(inside) == (0 <= want < limit)
+    if inside:
+      assert int(cell) == want
+  if nudge is None and 0.01 < frac < 0.99:
+    assert certain                        # far from an edge the fast decision always stands
+
+
+def test_floor_div_checked_is_undecided_only_on_the_edge():
+  o = validate.split_float64(-15.1)
+  r = f32(0.05)
+  xs = np.float32([-15.1 + 100 * 0.05 * (1 + 2 ** -40), -15.0, 0.0, 123.4567, np.nan, np.inf])
+  edges = np.float32(o[0]) + np.arange(0, 500, dtype=np.float32) * r    # float32 sums: near, rarely on, edges
+  x = jnp.asarray(np.concatenate([xs, edges]))
+  cell, inside, certain = (np.asarray(v) for v in _checked(x, jnp.asarray(o), r, size=4000))
+  for xv, c, i, ok in zip(np.asarray(x), cell, inside, certain):
+    if not ok:
+      continue
+    if not np.isfinite(xv):
+      assert not i
+      continue
+    want = _exact_floor(xv, o, r)
+    assert bool(i) == (0 <= want < 4000) and (not i or int(c) == want)
+  assert certain[:4].all() and not certain[4:6].any()      # NaN and inf stay undecided
+  # A point exactly on an edge: the residual is exactly 0 and the helper says so.
+  on_edge = np.float32(0.25) * 3
+  assert not bool(_checked(jnp.float32(on_edge), jnp.zeros((3,), jnp.float32), jnp.float32(0.25), size=4000)[2])
+
+
+@given(st.integers(0, 4000), coords(200.0), st.sampled_from([0.05, 0.1, 0.03, 0.5]), coords(200.0), resolutions)
+def test_centre_floor_bracket_contains_the_exact_floor(i, o, res, t, tres):
+  op, rp, tp = validate.split_float64(o), validate.split_float64(res), validate.split_float64(t)
+  lo, hi = geometry.centre_floor_bracket(jnp.float32(i), list(jnp.asarray(op)), list(jnp.asarray(rp)),
+                                         list(jnp.asarray(tp)), jnp.float32(tres))
+  centre = sum(Fraction(float(p)) for p in op) + (i + Fraction(1, 2)) * sum(Fraction(float(p)) for p in rp)
+  want = math.floor((centre - sum(Fraction(float(p)) for p in tp)) / Fraction(float(f32(tres))))
+  assert float(lo) <= want <= float(hi)
+
+
+def _split12(x):
+  x = np.asarray(x, np.float32)
+  hi = (x.view(np.uint32) & np.uint32(0xFFFFF000)).view(np.float32)
+  return hi, np.float32(x - hi)
+
+
+def _rounded_product_np(a, b):
+  ah, al = _split12(a)
+  bh, bl = _split12(b)
+  return np.float32(ah * bh) + ((np.float32(ah * bl) + np.float32(al * bh)) + np.float32(al * bl))
+
+
+normal32 = lambda lo, hi: st.floats(-hi, hi, width=32).filter(lambda v: v == 0 or abs(v) >= lo)
+
+
+@given(st.lists(normal32(1e-6, 1e6), min_size=1, max_size=16), normal32(1e-6, 1e3))
+def test_rounded_product_is_the_defined_sum_and_near_the_product(a, b):
+  a = np.float32(a)
+  got = np.asarray(jax.jit(geometry.rounded_product)(jnp.asarray(a), jnp.float32(b)))
+  want = _rounded_product_np(a, np.float32(b))
+  assert np.array_equal(got, want)
+  for g, x in zip(got, a):
+    exact = Fraction(float(x)) * Fraction(float(np.float32(b)))
+    ulp = Fraction(float(np.spacing(np.float32(abs(float(exact)))))) if exact else Fraction(0)
+    assert abs(Fraction(float(g)) - exact) <= ulp * (Fraction(1, 2) + Fraction(1, 2048))
+
+
+# ----------------------------------------------------------------------------- same frame
+
+
+def _same_frame_cases():
+  rng = np.random.default_rng(7)
+  cases = []
+  # The practical "aligned" case: a double costmap resolution against the float32 mask one.
+  origins = np.round(rng.uniform(8.6, 9.8, (B, 2)) / 0.05) * 0.05
+  cases.append(_fleet(rng, 0.05, 0.05, origins, [(9.0, 9.5), (9.15, 9.0)]))
+  # Binary-exact equal resolutions, origins on the mask grid and one ulp off it.
+  origins = np.round(rng.uniform(-3, 3, (B, 2)) * 4) / 4
+  origins[1] = _nudge(origins[1, 0], 1), _nudge(origins[1, 1], -1)
+  cases.append(_fleet(rng, 0.25, 0.25, origins, [(0.0, -1.0), (-0.5, 0.25)]))
+  # A finer mask (res / 2): every master centre lies exactly on a mask-cell edge.
+  origins = np.round(rng.uniform(-2, 2, (B, 2)) * 4) / 4
+  origins[2] = _nudge(origins[2, 0], -1), _nudge(origins[2, 1], 1)
+  cases.append(_fleet(rng, 0.5, 0.25, origins, [(0.0, 0.0), (-1.0, 0.5)]))
+  # A coarser mask, decimal resolutions: the window clip's quotients sit near integers.
+  origins = np.round(rng.uniform(-1, 1, (B, 2)) / 0.05) * 0.05
+  cases.append(_fleet(rng, 0.05, 0.1, origins, [(-0.5, -0.3), (0.1, -0.7)]))
+  # Anything: random resolutions and origins.
+  cases.append(_fleet(rng, 0.03, 0.07, rng.uniform(-1, 1, (B, 2)), rng.uniform(-1, 0, (M, 2))))
+  return cases
+
+
+@pytest.mark.parametrize("n", range(5))
+def test_same_frame_fast_paths_equal_the_exact_path(n):
+  case = _same_frame_cases()[n]
+  out = _fast_equals_exact(case)
+  assert (out != np.asarray(case[0].cost)).any()          # the filter wrote something
+
+
+def test_same_frame_fast_path_matches_float64_reference():
+  cm, mask, state, window, mask_index, enabled = _same_frame_cases()[0]
+  got, _ = _run(cm, mask, state, window, mask_index, jnp.ones((B,), bool), None, PLAIN)
+  for b in range(B):
+    i = int(mask_index[b])
+    win = np.clip(window[b], 0, [W, H, W, H])
+    origin = np.asarray(cm.origin[b], np.float64) + np.asarray(cm.origin_lo[b], np.float64).sum(-1)
+    res = float(cm.resolution[b]) + float(np.asarray(cm.resolution_lo[b], np.float64).sum())
+    morigin = np.asarray(mask.origin[i], np.float64) + np.asarray(mask.origin_lo[i], np.float64).sum(-1)
+    want, _ = reference.keepout_process(np.asarray(cm.cost[b]), origin, res, np.asarray(mask.data[i]), morigin,
+                                        np.asarray(mask.resolution[i]), win)
+    np.testing.assert_array_equal(got[b], want)
+
+
+# ----------------------------------------------------------------------------- other frame
+
+
+def _se2_cases():
+  rng = np.random.default_rng(11)
+  cases = []
+  # Binary-exact grids, yaw 0 and translations on the mask grid: every centre on an edge
+  # (whole windows undecided), one ulp off it, and small windows (a few undecided cells).
+  origins = np.round(rng.uniform(-2, 2, (B, 2)) * 4) / 4
+  case = _fleet(rng, 0.5, 0.25, origins, [(0.0, 0.0), (-0.75, 0.5)])
+  tf = np.zeros((B, 3), np.float32)
+  tf[:, :2] = np.round(rng.uniform(-1, 1, (B, 2)) * 4) / 4
+  tf[1, 0], tf[2, 1] = _nudge(tf[1, 0], 1), _nudge(tf[2, 1], -1)
+  windows = case[3].copy()
+  windows[3:] = [(2, 2, 5, 4), (0, 0, 2, 3), (5, 1, 8, 3)]
+  cases.append((case[:3] + (windows,) + case[4:], tf))
+  # Quarter turns (float32 pi/2: cos is -4.4e-8, not 0) and the same binary grids.
+  case = _fleet(rng, 0.5, 0.25, origins, [(-4.0, -4.0), (-3.5, -4.25)])
+  tf = np.zeros((B, 3), np.float32)
+  tf[:, 2] = np.float32(np.pi / 2) * rng.integers(-2, 3, B)
+  tf[:, :2] = np.round(rng.uniform(-1, 1, (B, 2)) * 4) / 4
+  cases.append((case, tf))
+  # Random transforms, decimal grids.
+  case = _fleet(rng, 0.05, 0.05, rng.uniform(-0.3, 0.3, (B, 2)), [(-0.5, -0.5), (-0.4, -0.6)])
+  tf = np.stack([rng.uniform(-0.2, 0.2, B), rng.uniform(-0.2, 0.2, B), rng.uniform(-np.pi, np.pi, B)], 1)
+  cases.append((case, tf.astype(np.float32)))
+  return cases
+
+
+@pytest.mark.parametrize("n", range(3))
+def test_other_frame_fast_path_equals_the_exact_path(n):
+  case, tf = _se2_cases()[n]
+  out = _fast_equals_exact(case, transform=jnp.asarray(tf))
+  assert (out != np.asarray(case[0].cost)).any()
+
+
+def test_edge_fleet_really_has_undecided_cells():
+  """The edge case above exercises the fallback: cells the fast arithmetic leaves open."""
+  (cm, mask, *_), tf = _se2_cases()[0]
+  axes = ko._se2_axes_one(geometry.origin_terms(cm.origin[0], cm.origin_lo[0]),
+                          geometry.resolution_terms(cm.resolution[0], cm.resolution_lo[0]), jnp.asarray(tf[0]), H, W)
+  px, py = ko._se2_grid(axes)
+  _, _, certain = geometry.world_to_index_checked(px, py, ko._mask_origin(mask, 0), mask.resolution[0], WM, HM)
+  assert not bool(jnp.all(certain))
+
+
+def _se2_numpy(cm, mask, b, i, tf):
+  """The other-frame semantics in NumPy: float32 rotation with rounded products, exact floor."""
+  o = np.asarray(cm.origin[b], np.float32)
+  for p in np.asarray(cm.origin_lo[b], np.float32).T:
+    o = o + p
+  r = np.float32(cm.resolution[b])
+  for p in np.asarray(cm.resolution_lo[b], np.float32):
+    r = np.float32(r + p)
+  cx = o[0] + _rounded_product_np(np.arange(W, dtype=np.float32) + np.float32(0.5), r)
+  cy = o[1] + _rounded_product_np(np.arange(H, dtype=np.float32) + np.float32(0.5), r)
+  c, s = np.float32(jnp.cos(jnp.float32(tf[2]))), np.float32(jnp.sin(jnp.float32(tf[2])))
+  px = (_rounded_product_np(c, cx)[None, :] - _rounded_product_np(s, cy)[:, None]) + np.float32(tf[0])
+  py = (_rounded_product_np(s, cx)[None, :] + _rounded_product_np(c, cy)[:, None]) + np.float32(tf[1])
+  mo = [sum(Fraction(float(p)) for p in np.asarray(mask.origin_lo[i], np.float64)[a]) + Fraction(float(mask.origin[i, a]))
+        for a in range(2)]
+  mres = Fraction(float(mask.resolution[i]))
+  mx = np.vectorize(lambda v: math.floor((Fraction(float(v)) - mo[0]) / mres))(px)
+  my = np.vectorize(lambda v: math.floor((Fraction(float(v)) - mo[1]) / mres))(py)
+  return px, py, mx, my
+
+
+def test_other_frame_semantics_against_numpy_and_float64_reference():
+  (cm, mask, state, window, mask_index, enabled), tf = _se2_cases()[2]
+  got, _ = _run(cm, mask, state, window, mask_index, jnp.ones((B,), bool), jnp.asarray(tf), PLAIN)
+  for b in range(B):
+    i = int(mask_index[b])
+    win = np.clip(window[b], 0, [W, H, W, H])
+    px, py, mx, my = _se2_numpy(cm, mask, b, i, tf[b])
+    data = np.asarray(mask.data[i])
+    want = np.asarray(cm.cost[b]).copy()
+    for j in range(win[1], win[3]):
+      for k in range(win[0], win[2]):
+        if 0 <= mx[j, k] < WM and 0 <= my[j, k] < HM:
+          d = reference.mask_cost(data[my[j, k], mx[j, k]])
+          if d != 255 and (d > want[j, k] or want[j, k] == 255):
+            want[j, k] = d
+    np.testing.assert_array_equal(got[b], want)
+    # And Nav2's float64 reference wherever the float64 centre is not within 1e-4 m of an edge.
+    origin = np.asarray(cm.origin[b], np.float64) + np.asarray(cm.origin_lo[b], np.float64).sum(-1)
+    res = float(cm.resolution[b]) + float(np.asarray(cm.resolution_lo[b], np.float64).sum())
+    morigin = np.asarray(mask.origin[i], np.float64) + np.asarray(mask.origin_lo[i], np.float64).sum(-1)
+    ref, _ = reference.keepout_process(np.asarray(cm.cost[b]), origin, res, data, morigin,
+                                       np.asarray(mask.resolution[i]), win, transform=tf[b])
+    near = np.zeros((H, W), bool)
+    cs, sn = math.cos(float(tf[b, 2])), math.sin(float(tf[b, 2]))
+    for j in range(H):
+      for k in range(W):
+        x, y = origin[0] + (k + 0.5) * res, origin[1] + (j + 0.5) * res
+        fx = (cs * x - sn * y + float(tf[b, 0]) - morigin[0]) / float(mask.resolution[i])
+        fy = (sn * x + cs * y + float(tf[b, 1]) - morigin[1]) / float(mask.resolution[i])
+        near[j, k] = min(abs(fx - round(fx)), abs(fy - round(fy))) * float(mask.resolution[i]) < 1e-4
+    np.testing.assert_array_equal(got[b][~near], ref[~near])
