@@ -328,7 +328,8 @@ def _keepout_stack_one(cost, origin, res, stack, i, mask_origin, mask_res, state
   return new_cost, _with_error(_processed(state, run), ~jnp.asarray(index_ok))
 
 
-keepout_one.__doc__ = _keepout_stack_one.__doc__
+keepout_one.__doc__ = ("KeepoutFilter::process for one robot and one mask `data` [Hm, Wm] (the per-robot "
+                       "kernel; see `_keepout_stack_one` for the arguments).\n\n" + (_keepout_stack_one.__doc__ or ""))
 
 
 def _window_flags(w, h, x0, y0, x1, y1, run):

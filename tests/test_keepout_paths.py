@@ -285,8 +285,9 @@ def test_other_frame_fast_path_equals_the_exact_path(n):
 def test_edge_fleet_really_has_undecided_cells():
   """The edge case above exercises the fallback: cells the fast arithmetic leaves open."""
   (cm, mask, *_), tf = _se2_cases()[0]
-  axes = ko._se2_axes_one(geometry.origin_terms(cm.origin[0], cm.origin_lo[0]),
-                          geometry.resolution_terms(cm.resolution[0], cm.resolution_lo[0]), jnp.asarray(tf[0]), H, W)
+  lo = lambda a: None if a is None else a[0]          # None: the geometry is exactly float32
+  axes = ko._se2_axes_one(geometry.origin_terms(cm.origin[0], lo(cm.origin_lo)),
+                          geometry.resolution_terms(cm.resolution[0], lo(cm.resolution_lo)), jnp.asarray(tf[0]), H, W)
   px, py = ko._se2_grid(axes)
   _, _, certain = geometry.world_to_index_checked(px, py, ko._mask_origin(mask, 0), mask.resolution[0], WM, HM)
   assert not bool(jnp.all(certain))
@@ -295,10 +296,10 @@ def test_edge_fleet_really_has_undecided_cells():
 def _se2_numpy(cm, mask, b, i, tf):
   """The other-frame semantics in NumPy: float32 rotation with rounded products, exact floor."""
   o = np.asarray(cm.origin[b], np.float32)
-  for p in np.asarray(cm.origin_lo[b], np.float32).T:
+  for p in (np.zeros((2, 0), np.float32) if cm.origin_lo is None else np.asarray(cm.origin_lo[b], np.float32)).T:
     o = o + p
   r = np.float32(cm.resolution[b])
-  for p in np.asarray(cm.resolution_lo[b], np.float32):
+  for p in (() if cm.resolution_lo is None else np.asarray(cm.resolution_lo[b], np.float32)):
     r = np.float32(r + p)
   cx = o[0] + _rounded_product_np(np.arange(W, dtype=np.float32) + np.float32(0.5), r)
   cy = o[1] + _rounded_product_np(np.arange(H, dtype=np.float32) + np.float32(0.5), r)
