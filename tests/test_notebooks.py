@@ -17,7 +17,7 @@ from nbclient import NotebookClient
 
 ROOT = Path(__file__).resolve().parents[1]
 NOTEBOOKS = sorted((ROOT / "notebooks").glob("*.ipynb"))
-EXPECTED = ["01_quickstart.ipynb", "02_fleet_experiment.ipynb", "03_scaling.ipynb"]
+EXPECTED = ["01_quickstart.ipynb", "02_fleet_experiment.ipynb", "03_scaling.ipynb", "04_rl.ipynb"]
 MAX_FIGURE_BYTES = 200_000
 MAX_NOTEBOOK_BYTES = 1_000_000
 
@@ -32,7 +32,7 @@ def _errors(nb):
           for o in c.get("outputs", []) if o.get("output_type") == "error"]
 
 
-def test_the_three_notebooks_are_there():
+def test_the_four_notebooks_are_there():
   assert [p.name for p in NOTEBOOKS] == EXPECTED
 
 
