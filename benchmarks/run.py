@@ -60,8 +60,10 @@ def measure(fn, input_sets, repeats, outputs=None, between=None):
   """(compile_s, steady_s median, all steady times) for jitted fn over rotated input sets.
 
   `outputs`, a list, receives each input set's result from the warm-up runs;
-  `between(k)`, if given, runs (untimed here) after timed run k: a baseline timed
-  in turn with the JAX runs sees the same machine load (the VM is shared).
+  `between(n)`, if given, runs (untimed here) after the first half of the timed
+  runs and after the rest, n being the runs just timed: a baseline timed in two
+  blocks between them sees the same machine load (the VM is shared) without
+  evicting the caches between two JAX runs.
   """
   jitted = jax.jit(fn)
   t = time.perf_counter()
@@ -72,13 +74,14 @@ def measure(fn, input_sets, repeats, outputs=None, between=None):
     if outputs is not None:
       outputs.append(out)
   times = []
-  for k in range(max(repeats, 5)):
+  n = max(repeats, 5)
+  for k in range(n):
     args = input_sets[k % len(input_sets)]
     t = time.perf_counter()
     jax.block_until_ready(compiled(*args))
     times.append(time.perf_counter() - t)
-    if between is not None:
-      between(k)
+    if between is not None and k + 1 in (n // 2, n):
+      between(k + 1 - (0 if k + 1 == n // 2 else n // 2))
   return compile_s, float(np.median(times)), times
 
 
@@ -150,8 +153,7 @@ def bench_keepout(kind, sz, b):
 
   outs = []
   peer = PeerTimer(sets, min(b, sz["cpp_keepout_b"]))
-  c, s, _ = measure(fn, sets, sz["repeats"], outputs=outs,
-                    between=lambda k: peer.run(k, [o[0] for o in outs] if k == 0 else None))
+  c, s, _ = measure(fn, sets, sz["repeats"], outputs=outs, between=lambda n: peer.block(n, [o[0] for o in outs]))
   cells = b * hw * hw
   fig = figure(kind, dict(B=b, H=hw, W=hw, mask=[n, n], mask_res=mask_res, costmap_res=RES,
                           dtype="uint8 cost, int8 mask", transform=transform),
@@ -170,9 +172,9 @@ def bench_keepout(kind, sz, b):
 class PeerTimer:
   """The C++ peer on the first b robots of each (costmap, mask, transform) set.
 
-  `run(k, costs)` checks the peer against `costs` (the result to match, per set)
-  when they are given, then times one peer run on set k % 2; the callers time it in
-  turn with their own runs. `result()` is the figure's `cpp_peer` entry.
+  `block(n, costs)` checks the peer against `costs` (the result to match, per set)
+  the first time, then times n peer runs, rotating the sets; the callers time blocks
+  between blocks of their own runs. `result()` is the figure's `cpp_peer` entry.
   """
 
   def __init__(self, sets, b, label="JAX"):
@@ -181,15 +183,16 @@ class PeerTimer:
     if self.fn is not None:
       self.inputs = [nav2_peer.host_inputs(cm, mask, transform=tf, num_robots=b) for cm, mask, tf in sets]
 
-  def run(self, k, costs=None):
+  def block(self, n, costs):
     if self.fn is None:
       return
-    if costs is not None:
+    if not self.checks:
       self.checks = [nav2_peer.check(self.fn, inp, np.asarray(c[:self.b]), self.label)
                      for inp, c in zip(self.inputs, costs)]
       for inp in self.inputs:                   # warm (first touch), untimed
         nav2_peer.run(self.fn, inp)
-    self.times.append(nav2_peer.run(self.fn, self.inputs[k % len(self.inputs)])[1])
+    for k in range(n):
+      self.times.append(nav2_peer.run(self.fn, self.inputs[k % len(self.inputs)])[1])
 
   def result(self):
     if self.fn is None:
@@ -197,7 +200,7 @@ class PeerTimer:
     steady = float(np.median(self.times))
     h, w = self.inputs[0]["cost"].shape[1:]
     return dict(impl=self.desc, B=self.b, steady_s=steady, throughput=self.b * h * w / steady, unit="cells/s",
-                timed="in turn with the runs it is compared with", check=self.checks[0] +
+                timed="in two blocks between two blocks of the runs it is compared with", check=self.checks[0] +
                 f" (and {len(self.checks) - 1} more input set(s) checked the same way)")
 
 
@@ -342,13 +345,15 @@ def bench_baseline_keepout(sz, b):
                for c, o, rs, d, mo, mr in sets]
   peer = PeerTimer(cpu_sets, b, label="the NumPy loop")
   times = []
-  for k in range(max(sz["repeats"], 5)):
+  n = max(sz["repeats"], 5)
+  for k in range(n):
     cost, origin, res, data, mo, mres = sets[k % 2]
     t = time.perf_counter()
     for r in range(b):
       numpy_keepout_one(cost[r], origin[r], res, data, mo, mres)
     times.append(time.perf_counter() - t)
-    peer.run(k, numpy_out if k == 0 else None)
+    if k + 1 in (n // 2, n):
+      peer.block(n // 2 if k + 1 == n // 2 else n - n // 2, numpy_out)
   st = float(np.median(times))
   fig = figure("baseline_keepout", dict(B=b, H=hw, W=hw, mask=[n, n], impl="numpy per-robot loop, float64",
                                         dtype="uint8 cost, int8 mask"), 0.0, st, b * hw * hw, "cells/s")
