@@ -56,14 +56,16 @@ def sizes(platform_name: str, quick: bool) -> dict:
 # ----------------------------------------------------------------------------- timing
 
 
-def measure(fn, input_sets, repeats, outputs=None, between=None):
+def measure(fn, input_sets, repeats, outputs=None, between=None, after_warmup=None):
   """(compile_s, steady_s median, all steady times) for jitted fn over rotated input sets.
 
   `outputs`, a list, receives each input set's result from the warm-up runs;
   `between(n)`, if given, runs (untimed here) after the first half of the timed
   runs and after the rest, n being the runs just timed: a baseline timed in two
   blocks between them sees the same machine load (the VM is shared) without
-  evicting the caches between two JAX runs.
+  evicting the caches between two JAX runs. `after_warmup(outputs)` runs once after
+  the warm-up (then every set is run once more, untimed, so the allocator is back in
+  its steady state: a fresh 10 MB output costs 2,500 page faults, ~3 ms here).
   """
   jitted = jax.jit(fn)
   t = time.perf_counter()
@@ -73,6 +75,10 @@ def measure(fn, input_sets, repeats, outputs=None, between=None):
     out = jax.block_until_ready(compiled(*args))
     if outputs is not None:
       outputs.append(out)
+  if after_warmup is not None:
+    after_warmup(outputs)
+    for args in input_sets:
+      jax.block_until_ready(compiled(*args))
   times = []
   n = max(repeats, 5)
   for k in range(n):
@@ -153,7 +159,8 @@ def bench_keepout(kind, sz, b):
 
   outs = []
   peer = PeerTimer(sets, min(b, sz["cpp_keepout_b"]))
-  c, s, _ = measure(fn, sets, sz["repeats"], outputs=outs, between=lambda n: peer.block(n, [o[0] for o in outs]))
+  c, s, _ = measure(fn, sets, sz["repeats"], outputs=outs, between=peer.block,
+                    after_warmup=lambda o: peer.prepare([x[0] for x in o]))
   cells = b * hw * hw
   fig = figure(kind, dict(B=b, H=hw, W=hw, mask=[n, n], mask_res=mask_res, costmap_res=RES,
                           dtype="uint8 cost, int8 mask", transform=transform),
@@ -172,9 +179,11 @@ def bench_keepout(kind, sz, b):
 class PeerTimer:
   """The C++ peer on the first b robots of each (costmap, mask, transform) set.
 
-  `block(n, costs)` checks the peer against `costs` (the result to match, per set)
-  the first time, then times n peer runs, rotating the sets; the callers time blocks
-  between blocks of their own runs. `result()` is the figure's `cpp_peer` entry.
+  `prepare(costs)` checks the peer against `costs` (the result to match, per set)
+  and warms it; `block(n)` times n peer runs, rotating the sets, on preallocated
+  buffers (no allocation that would disturb the JAX runs' allocator state); the
+  callers time blocks between blocks of their own runs. `result()` is the figure's
+  `cpp_peer` entry.
   """
 
   def __init__(self, sets, b, label="JAX"):
@@ -183,16 +192,22 @@ class PeerTimer:
     if self.fn is not None:
       self.inputs = [nav2_peer.host_inputs(cm, mask, transform=tf, num_robots=b) for cm, mask, tf in sets]
 
-  def block(self, n, costs):
+  def prepare(self, costs):
     if self.fn is None:
       return
-    if not self.checks:
-      self.checks = [nav2_peer.check(self.fn, inp, np.asarray(c[:self.b]), self.label)
-                     for inp, c in zip(self.inputs, costs)]
-      for inp in self.inputs:                   # warm (first touch), untimed
-        nav2_peer.run(self.fn, inp)
+    self.checks = [nav2_peer.check(self.fn, inp, np.asarray(c[:self.b]), self.label)
+                   for inp, c in zip(self.inputs, costs)]
+    self.buffers = [inp["cost"].copy() for inp in self.inputs]
+    for inp, buf in zip(self.inputs, self.buffers):     # warm (first touch), untimed
+      nav2_peer.run(self.fn, inp, buf)
+
+  def block(self, n):
+    if self.fn is None:
+      return
     for k in range(n):
-      self.times.append(nav2_peer.run(self.fn, self.inputs[k % len(self.inputs)])[1])
+      inp, buf = self.inputs[k % len(self.inputs)], self.buffers[k % len(self.inputs)]
+      np.copyto(buf, inp["cost"])
+      self.times.append(nav2_peer.run(self.fn, inp, buf)[1])
 
   def result(self):
     if self.fn is None:
@@ -344,6 +359,7 @@ def bench_baseline_keepout(sz, b):
   numpy_out = [np.stack([numpy_keepout_one(c[r], o[r], rs, d, mo, mr) for r in range(b)])
                for c, o, rs, d, mo, mr in sets]
   peer = PeerTimer(cpu_sets, b, label="the NumPy loop")
+  peer.prepare(numpy_out)
   times = []
   n = max(sz["repeats"], 5)
   for k in range(n):
@@ -353,7 +369,7 @@ def bench_baseline_keepout(sz, b):
       numpy_keepout_one(cost[r], origin[r], res, data, mo, mres)
     times.append(time.perf_counter() - t)
     if k + 1 in (n // 2, n):
-      peer.block(n // 2 if k + 1 == n // 2 else n - n // 2, numpy_out)
+      peer.block(n // 2 if k + 1 == n // 2 else n - n // 2)
   st = float(np.median(times))
   fig = figure("baseline_keepout", dict(B=b, H=hw, W=hw, mask=[n, n], impl="numpy per-robot loop, float64",
                                         dtype="uint8 cost, int8 mask"), 0.0, st, b * hw * hw, "cells/s")
