@@ -461,7 +461,7 @@ def table(report) -> str:
     if peer and "throughput" in peer:
       note += f"  x{r['speedup_vs_cpp']:.3g} vs C++ peer ({_fmt(peer['throughput'], 'cells/s')}, 1 core)"
     elif peer:
-      note += f"  C++ peer {peer.get('skipped', '')}"
+      note += f"  C++ peer skipped: {peer.get('skipped', '')}"
     lines.append(f"{name:22s} {b!s:>7s} {r['compile_s']:10.3f} {r['steady_s']:10.5f} "
                  f"{_fmt(r['throughput'], r['unit']):>18s}  {note}")
   return "\n".join(lines)
