@@ -15,6 +15,7 @@ check raises, so no ratio is reported against a peer that computes something els
 from __future__ import annotations
 
 import ctypes
+import hashlib
 import os
 import pathlib
 import shutil
@@ -35,29 +36,34 @@ def build():
   """Compiles and loads the peer once per process.
 
   Returns:
-    (ctypes library or None, description): the description names the compiler and flags,
-    or says why the peer is unavailable.
+    (ctypes function or None, description): the description names the compiler and
+    flags, or says why the peer was skipped.
   """
   global _LIB
   if _LIB is not None:
     return _LIB
   cxx = os.environ.get("CXX") or shutil.which("g++")
   if not cxx:
-    _LIB = (None, "skipped: no C++ compiler (g++ not on PATH and CXX unset)")
+    _LIB = (None, "no C++ compiler (g++ not on PATH and CXX unset)")
     return _LIB
   if not SOURCE.exists():
-    _LIB = (None, f"skipped: peer source {SOURCE} not found")
+    _LIB = (None, f"peer source {SOURCE} not found")
     return _LIB
-  out = pathlib.Path(tempfile.mkdtemp(prefix="nav2_peer_")) / "libnav2_keepout_peer.so"
-  cmd = [cxx, *FLAGS, "-o", str(out), str(SOURCE)]
-  try:
-    proc = subprocess.run(cmd, capture_output=True, text=True, timeout=120)
-  except (OSError, subprocess.TimeoutExpired) as e:
-    _LIB = (None, f"skipped: {' '.join(cmd)} failed: {type(e).__name__}: {e}")
-    return _LIB
-  if proc.returncode != 0:
-    _LIB = (None, f"skipped: {' '.join(cmd)} exited {proc.returncode}: {proc.stderr.strip()[:300]}")
-    return _LIB
+  # One build per source, compiler and flags, kept in the temp folder between runs.
+  key = hashlib.sha256(SOURCE.read_bytes() + " ".join([cxx, *FLAGS]).encode()).hexdigest()[:16]
+  out = pathlib.Path(tempfile.gettempdir()) / f"jaxfilters_nav2_peer_{key}.so"
+  part = out.with_suffix(f".{os.getpid()}.so")
+  cmd = [cxx, *FLAGS, "-o", str(part), str(SOURCE)]
+  if not out.exists():
+    try:
+      proc = subprocess.run(cmd, capture_output=True, text=True, timeout=120)
+    except (OSError, subprocess.TimeoutExpired) as e:
+      _LIB = (None, f"{' '.join(cmd)} failed: {type(e).__name__}: {e}")
+      return _LIB
+    if proc.returncode != 0:
+      _LIB = (None, f"{' '.join(cmd)} exited {proc.returncode}: {proc.stderr.strip()[:300]}")
+      return _LIB
+    os.replace(part, out)                       # atomic: a concurrent run never loads half a file
   lib = ctypes.CDLL(str(out))
   fn = lib.nav2_keepout_batch
   fn.restype = ctypes.c_int

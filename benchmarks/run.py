@@ -56,12 +56,16 @@ def sizes(platform_name: str, quick: bool) -> dict:
 # ----------------------------------------------------------------------------- timing
 
 
-def measure(fn, input_sets, repeats, outputs=None, between=None):
+def measure(fn, input_sets, repeats, outputs=None, between=None, after_warmup=None):
   """(compile_s, steady_s median, all steady times) for jitted fn over rotated input sets.
 
   `outputs`, a list, receives each input set's result from the warm-up runs;
-  `between(k)`, if given, runs (untimed here) after timed run k: a baseline timed
-  in turn with the JAX runs sees the same machine load (the VM is shared).
+  `between(n)`, if given, runs (untimed here) after the first half of the timed
+  runs and after the rest, n being the runs just timed: a baseline timed in two
+  blocks between them sees the same machine load (the VM is shared) without
+  evicting the caches between two JAX runs. `after_warmup(outputs)` runs once after
+  the warm-up (then every set is run once more, untimed, so the allocator is back in
+  its steady state: a fresh 10 MB output costs 2,500 page faults, ~3 ms here).
   """
   jitted = jax.jit(fn)
   t = time.perf_counter()
@@ -71,14 +75,19 @@ def measure(fn, input_sets, repeats, outputs=None, between=None):
     out = jax.block_until_ready(compiled(*args))
     if outputs is not None:
       outputs.append(out)
+  if after_warmup is not None:
+    after_warmup(outputs)
+    for args in input_sets:
+      jax.block_until_ready(compiled(*args))
   times = []
-  for k in range(max(repeats, 5)):
+  n = max(repeats, 5)
+  for k in range(n):
     args = input_sets[k % len(input_sets)]
     t = time.perf_counter()
     jax.block_until_ready(compiled(*args))
     times.append(time.perf_counter() - t)
-    if between is not None:
-      between(k)
+    if between is not None and k + 1 in (n // 2, n):
+      between(k + 1 - (0 if k + 1 == n // 2 else n // 2))
   return compile_s, float(np.median(times)), times
 
 
@@ -150,8 +159,8 @@ def bench_keepout(kind, sz, b):
 
   outs = []
   peer = PeerTimer(sets, min(b, sz["cpp_keepout_b"]))
-  c, s, _ = measure(fn, sets, sz["repeats"], outputs=outs,
-                    between=lambda k: peer.run(k, [o[0] for o in outs] if k == 0 else None))
+  c, s, _ = measure(fn, sets, sz["repeats"], outputs=outs, between=peer.block,
+                    after_warmup=lambda o: peer.prepare([x[0] for x in o]))
   cells = b * hw * hw
   fig = figure(kind, dict(B=b, H=hw, W=hw, mask=[n, n], mask_res=mask_res, costmap_res=RES,
                           dtype="uint8 cost, int8 mask", transform=transform),
@@ -170,9 +179,11 @@ def bench_keepout(kind, sz, b):
 class PeerTimer:
   """The C++ peer on the first b robots of each (costmap, mask, transform) set.
 
-  `run(k, costs)` checks the peer against `costs` (the result to match, per set)
-  when they are given, then times one peer run on set k % 2; the callers time it in
-  turn with their own runs. `result()` is the figure's `cpp_peer` entry.
+  `prepare(costs)` checks the peer against `costs` (the result to match, per set)
+  and warms it; `block(n)` times n peer runs, rotating the sets, on preallocated
+  buffers (no allocation that would disturb the JAX runs' allocator state); the
+  callers time blocks between blocks of their own runs. `result()` is the figure's
+  `cpp_peer` entry.
   """
 
   def __init__(self, sets, b, label="JAX"):
@@ -181,15 +192,22 @@ class PeerTimer:
     if self.fn is not None:
       self.inputs = [nav2_peer.host_inputs(cm, mask, transform=tf, num_robots=b) for cm, mask, tf in sets]
 
-  def run(self, k, costs=None):
+  def prepare(self, costs):
     if self.fn is None:
       return
-    if costs is not None:
-      self.checks = [nav2_peer.check(self.fn, inp, np.asarray(c[:self.b]), self.label)
-                     for inp, c in zip(self.inputs, costs)]
-      for inp in self.inputs:                   # warm (first touch), untimed
-        nav2_peer.run(self.fn, inp)
-    self.times.append(nav2_peer.run(self.fn, self.inputs[k % len(self.inputs)])[1])
+    self.checks = [nav2_peer.check(self.fn, inp, np.asarray(c[:self.b]), self.label)
+                   for inp, c in zip(self.inputs, costs)]
+    self.buffers = [inp["cost"].copy() for inp in self.inputs]
+    for inp, buf in zip(self.inputs, self.buffers):     # warm (first touch), untimed
+      nav2_peer.run(self.fn, inp, buf)
+
+  def block(self, n):
+    if self.fn is None:
+      return
+    for k in range(n):
+      inp, buf = self.inputs[k % len(self.inputs)], self.buffers[k % len(self.inputs)]
+      np.copyto(buf, inp["cost"])
+      self.times.append(nav2_peer.run(self.fn, inp, buf)[1])
 
   def result(self):
     if self.fn is None:
@@ -197,7 +215,7 @@ class PeerTimer:
     steady = float(np.median(self.times))
     h, w = self.inputs[0]["cost"].shape[1:]
     return dict(impl=self.desc, B=self.b, steady_s=steady, throughput=self.b * h * w / steady, unit="cells/s",
-                timed="in turn with the runs it is compared with", check=self.checks[0] +
+                timed="in two blocks between two blocks of the runs it is compared with", check=self.checks[0] +
                 f" (and {len(self.checks) - 1} more input set(s) checked the same way)")
 
 
@@ -341,14 +359,17 @@ def bench_baseline_keepout(sz, b):
   numpy_out = [np.stack([numpy_keepout_one(c[r], o[r], rs, d, mo, mr) for r in range(b)])
                for c, o, rs, d, mo, mr in sets]
   peer = PeerTimer(cpu_sets, b, label="the NumPy loop")
+  peer.prepare(numpy_out)
   times = []
-  for k in range(max(sz["repeats"], 5)):
+  n = max(sz["repeats"], 5)
+  for k in range(n):
     cost, origin, res, data, mo, mres = sets[k % 2]
     t = time.perf_counter()
     for r in range(b):
       numpy_keepout_one(cost[r], origin[r], res, data, mo, mres)
     times.append(time.perf_counter() - t)
-    peer.run(k, numpy_out if k == 0 else None)
+    if k + 1 in (n // 2, n):
+      peer.block(n // 2 if k + 1 == n // 2 else n - n // 2)
   st = float(np.median(times))
   fig = figure("baseline_keepout", dict(B=b, H=hw, W=hw, mask=[n, n], impl="numpy per-robot loop, float64",
                                         dtype="uint8 cost, int8 mask"), 0.0, st, b * hw * hw, "cells/s")
@@ -440,7 +461,7 @@ def table(report) -> str:
     if peer and "throughput" in peer:
       note += f"  x{r['speedup_vs_cpp']:.3g} vs C++ peer ({_fmt(peer['throughput'], 'cells/s')}, 1 core)"
     elif peer:
-      note += f"  C++ peer {peer.get('skipped', '')}"
+      note += f"  C++ peer skipped: {peer.get('skipped', '')}"
     lines.append(f"{name:22s} {b!s:>7s} {r['compile_s']:10.3f} {r['steady_s']:10.5f} "
                  f"{_fmt(r['throughput'], r['unit']):>18s}  {note}")
   return "\n".join(lines)

@@ -875,7 +875,7 @@ def _se2_batch(costmap, mask, idx, idx_ok, state, window, enabled, transform, *,
     # then gather and write. Every buffer stays a few MB: XLA:CPU maps fresh pages for
     # buffers beyond glibc's 32 MB mmap threshold on every call (a 40 MB int32 code array
     # cost 10,000 page faults, ~10 ms, per call).
-    cb = _divisor_at_most(b, max(2, (1 << 19) // (h * w)))
+    cb = _divisor_at_most(b, max(2, (1 << 21) // (h * w)))
     split = lambda x: x.reshape(b // cb, cb, *x.shape[1:])
 
     def chunk(a):

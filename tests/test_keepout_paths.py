@@ -163,6 +163,17 @@ def test_floor_div_checked_is_undecided_only_on_the_edge():
   assert not bool(_checked(jnp.float32(on_edge), jnp.zeros((3,), jnp.float32), jnp.float32(0.25), size=4000)[2])
 
 
+def test_world_to_cell_is_off_the_grid_beyond_float32_quotients():
+  # x / res overflows float32 (3e37 / 0.05): the exact floor used to restart from 0 and
+  # report cell 1 as valid; both the exact and the checked helpers say off the grid.
+  x = jnp.asarray([3e37, 1e38, -1e38, 3.4e38], jnp.float32)
+  y = jnp.ones((4,), jnp.float32)
+  _, _, valid = geometry.world_to_cell(x, y, jnp.zeros((2,), jnp.float32), jnp.float32(0.05), 100, 100)
+  assert not np.asarray(valid).any()
+  _, inside, certain = geometry.world_to_index_checked(x, y, jnp.zeros((2,), jnp.float32), jnp.float32(0.05), 100, 100)
+  assert not np.asarray(inside & certain).any()
+
+
 @given(st.integers(0, 4000), coords(200.0), st.sampled_from([0.05, 0.1, 0.03, 0.5]), coords(200.0), resolutions)
 def test_centre_floor_bracket_contains_the_exact_floor(i, o, res, t, tres):
   op, rp, tp = validate.split_float64(o), validate.split_float64(res), validate.split_float64(t)
