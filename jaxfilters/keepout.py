@@ -51,7 +51,7 @@ import numpy as np
 
 from jaxfilters import constants
 from jaxfilters import geometry
-from jaxfilters.types import Costmap, FilterMask, _dataclass, check_costmap, robot_inputs
+from jaxfilters.types import Costmap, FilterMask, _dataclass, check_costmap, per_robot_bool, robot_inputs
 
 _F32 = jnp.float32
 _EMPTY_BOX = (np.inf, np.inf, -np.inf, -np.inf)
@@ -1078,11 +1078,7 @@ def keepout_update_bounds(costmap: Costmap, mask: FilterMask, poses, state: Keep
   bounds = jnp.asarray(bounds, _F32)
   if bounds.shape != (b, 4):
     raise ValueError(f"bounds must be float [B, 4] = ({b}, 4); got {tuple(bounds.shape)}")
-  new_mask = jnp.asarray(False if new_mask is None else new_mask)
-  if new_mask.dtype != jnp.bool_ or new_mask.shape not in ((), (b,)):
-    raise ValueError(f"new_mask must be a bool scalar or bool [B] = ({b},); got "
-                     f"{new_mask.dtype}{tuple(new_mask.shape)}")
-  new_mask = jnp.broadcast_to(new_mask, (b,))
+  new_mask = per_robot_bool("new_mask", new_mask, b, default=False)
   state = _fill_error(state, b)
   return _update_bounds_jit(costmap, mask, idx, idx_ok, poses, state, bounds, new_mask, enabled, transform,
                             override_lethal_cost=config.override_lethal_cost)

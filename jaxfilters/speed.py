@@ -30,7 +30,7 @@ import numpy as np
 
 from jaxfilters import constants
 from jaxfilters import geometry
-from jaxfilters.types import FilterInfo, FilterMask, _dataclass, robot_inputs
+from jaxfilters.types import FilterInfo, FilterMask, _dataclass, per_robot_bool, robot_inputs
 
 _F32 = jnp.float32
 
@@ -337,11 +337,7 @@ def speed_filter_lookahead(mask: FilterMask, poses, state: SpeedState, paths, pa
   vel = jnp.asarray(velocities, _F32)
   if vel.shape != (b,):
     raise ValueError(f"velocities must be float [B] = ({b},); got {tuple(vel.shape)}")
-  new_path = jnp.asarray(False if new_path is None else new_path)
-  if new_path.dtype != jnp.bool_ or new_path.shape not in ((), (b,)):
-    raise ValueError(f"new_path must be a bool scalar or bool [B] = ({b},); got "
-                     f"{new_path.dtype}{tuple(new_path.shape)}")
-  new_path = jnp.broadcast_to(new_path, (b,))
+  new_path = per_robot_bool("new_path", new_path, b, default=False)
   return _lookahead_jit(mask, poses, state, paths, lengths.astype(jnp.int32), vel, new_path, idx, idx_ok,
                         enabled, transform, config=config)
 

@@ -399,6 +399,19 @@ def check_poses(poses: Any, num_robots: int) -> jax.Array:
   return p.astype(jnp.float32)
 
 
+def per_robot_bool(name: str, value: Any, num_robots: int, *, default: bool) -> jax.Array:
+  """A per-robot flag: None (-> `default`), a bool scalar or bool [B]; returns bool [B].
+
+  Raises:
+    ValueError: another dtype or shape (a float or int flag is not silently cast).
+  """
+  b = num_robots
+  v = jnp.asarray(default if value is None else value)
+  if v.dtype != jnp.bool_ or v.shape not in ((), (b,)):
+    raise ValueError(f"{name} must be a bool scalar or bool [B] = ({b},); got {v.dtype}{tuple(v.shape)}")
+  return jnp.broadcast_to(v, (b,))
+
+
 def robot_inputs(mask: FilterMask, poses: Any, num_robots: int, mask_index=None, enabled=None,
                  transform=None):
   """Validates and broadcasts the per-robot inputs every filter takes.
@@ -425,10 +438,7 @@ def robot_inputs(mask: FilterMask, poses: Any, num_robots: int, mask_index=None,
   check_mask(mask, "filter input")
   idx, idx_ok = resolve_mask_index(mask, mask_index, b)
   poses = check_poses(poses, b)
-  en = jnp.asarray(True if enabled is None else enabled)
-  if en.dtype != jnp.bool_ or en.shape not in ((), (b,)):
-    raise ValueError(f"enabled must be a bool scalar or bool [B] = ({b},); got {en.dtype}{tuple(en.shape)}")
-  en = jnp.broadcast_to(en, (b,))
+  en = per_robot_bool("enabled", enabled, b, default=True)
   if transform is not None:
     transform = jnp.asarray(transform, jnp.float32)
     if transform.shape not in ((3,), (b, 3)):
