@@ -17,7 +17,8 @@ from nbclient import NotebookClient
 
 ROOT = Path(__file__).resolve().parents[1]
 NOTEBOOKS = sorted((ROOT / "notebooks").glob("*.ipynb"))
-EXPECTED = ["01_quickstart.ipynb", "02_fleet_experiment.ipynb", "03_scaling.ipynb", "04_rl.ipynb"]
+EXPECTED = ["01_quickstart.ipynb", "02_fleet_experiment.ipynb", "03_scaling.ipynb", "04_rl.ipynb",
+            "05_soft_zones.ipynb"]
 MAX_FIGURE_BYTES = 200_000
 MAX_NOTEBOOK_BYTES = 1_000_000
 
