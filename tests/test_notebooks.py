@@ -33,7 +33,7 @@ def _errors(nb):
           for o in c.get("outputs", []) if o.get("output_type") == "error"]
 
 
-def test_the_four_notebooks_are_there():
+def test_the_notebooks_are_there():
   assert [p.name for p in NOTEBOOKS] == EXPECTED
 
 
