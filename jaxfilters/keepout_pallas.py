@@ -44,8 +44,6 @@ import math
 import jax
 import jax.numpy as jnp
 import numpy as np
-from jax.experimental import pallas as pl
-from jax.experimental.pallas import triton as plgpu
 
 KERNELS = ("auto", "xla", "pallas")
 LAYOUTS = ("flat", "rows")
@@ -180,6 +178,13 @@ def _rule(c, m1, lethal, *, escape: bool, lethal_cost: int):
   return jnp.maximum(c1, m1) - jnp.uint8(1)
 
 
+def _pallas():
+  """(pallas, pallas.triton), imported on first use: `import jaxfilters` does not load Pallas."""
+  from jax.experimental import pallas as pl  # noqa: PLC0415
+  from jax.experimental.pallas import triton as plgpu  # noqa: PLC0415
+  return pl, plgpu
+
+
 def _params(p_ref, r):
   return [p_ref[r, k] for k in range(NUM_PARAMS)]
 
@@ -191,6 +196,7 @@ def _in_range(v, lo, hi):
 
 def _flat_kernel(p_ref, cost_ref, tab_ref, out_ref, *, h, w, plane, pitch, rows, span, nblk, escape, lethal_cost,
                  in_place):
+  pl, plgpu = _pallas()
   pid = pl.program_id(0)
   r, row0 = jax.lax.div(pid, nblk), jax.lax.rem(pid, nblk) * rows
   i, sx, sy, x0, x1, y0, y1, lethal = _params(p_ref, r)
@@ -213,6 +219,7 @@ def _flat_kernel(p_ref, cost_ref, tab_ref, out_ref, *, h, w, plane, pitch, rows,
 
 
 def _rows_kernel(p_ref, cost_ref, tab_ref, out_ref, *, h, rows, span, nblk, w, escape, lethal_cost, in_place):
+  pl, plgpu = _pallas()
   pid = pl.program_id(0)
   r, row0 = jax.lax.div(pid, nblk), jax.lax.rem(pid, nblk) * rows
   i, sx, sy, x0, x1, y0, y1, lethal = _params(p_ref, r)
@@ -289,6 +296,7 @@ def aligned_write(cost, table, params, *, escape: bool, lethal_cost: int, tuning
     parts = [aligned_write(cost[s:s + chunk], table, params[s:s + chunk], escape=escape,
                            lethal_cost=lethal_cost, tuning=tuning) for s in range(0, b, chunk)]
     return jnp.concatenate(parts, axis=0)
+  pl, plgpu = _pallas()
   rows, span, nblk = block_shape(h, w, tuning)
   statics = dict(h=h, w=w, rows=rows, span=span, nblk=nblk, escape=bool(escape), lethal_cost=int(lethal_cost),
                  in_place=tuning.in_place)
