@@ -172,6 +172,18 @@ def _compile(fn, args, donate):
   return compiled, time.perf_counter() - t
 
 
+def _hlo_summary(compiled) -> dict:
+  """What the compiled program runs at its top level: copies of whole buffers, kernels, loops."""
+  try:
+    text = compiled.as_text()
+  except Exception as e:  # noqa: BLE001
+    return dict(unavailable=f"{type(e).__name__}: {e}")
+  big_copies = [ln.strip()[:160] for ln in text.splitlines()
+                if re.search(r"= u8\[\d{3,},[^]]*\][^=]*\bcopy\(", ln)]
+  return dict(uint8_batch_copies=big_copies, custom_calls=len(re.findall(r"custom-call\(", text)),
+              conditionals=len(re.findall(r"\bconditional\(", text)), whiles=len(re.findall(r"\bwhile\(", text)))
+
+
 def _cells_fig(timing, cells, copy_bps):
   out = dict(timing)
   out["cells_per_s"] = cells / timing["steady_s"]
@@ -225,7 +237,8 @@ def check_and_time(fleet, tunings, repeats, deadline, *, checks=True, timing=Tru
   if timing:
     try:
       compiled, c = _compile(filter_fn(xla, False), args, False)
-      out["xla"] = dict(compile_s=c, **_time(compiled, args, donate=False, repeats=repeats))
+      out["xla"] = dict(compile_s=c, hlo=_hlo_summary(compiled), **_time(compiled, args, donate=False,
+                                                                          repeats=repeats))
       del compiled
       compiled, c = _compile(filter_fn(xla, False), args, True)
       out["xla_donated"] = dict(compile_s=c, **_time(compiled, args, donate=True, repeats=repeats))
@@ -246,6 +259,7 @@ def check_and_time(fleet, tunings, repeats, deadline, *, checks=True, timing=Tru
         cfg = dataclasses.replace(xla, kernel="pallas", pallas=tuning)
         compiled, c = _compile(filter_fn(cfg, False), args, tuning.in_place)
         r["compile_s"] = c
+        r["hlo"] = _hlo_summary(compiled)
         if len(_PTX) > n_ptx:
           r["ptx"] = [_ptx_summary(a) for a in _PTX[n_ptx:]]
         r.update(_time(compiled, args, donate=tuning.in_place, repeats=repeats))

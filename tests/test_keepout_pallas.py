@@ -261,6 +261,7 @@ def test_filter_with_pallas_equals_float64_reference(config):
     assert sliced == 6 - len(kwargs.get("other_res", ())), "the fleet must take the intended paths"
     changed += int(np.count_nonzero(want != np.asarray(cm.cost)))
   assert changed > 200
+  assert run._cache_size() == 1, "new fleets of the same shapes must not recompile"
 
 
 # ----------------------------------------------------------------------------- selection and options
