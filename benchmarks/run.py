@@ -34,8 +34,8 @@ from jaxfilters.grid import OccupancyGrid
 from benchmarks import nav2_peer
 
 RES = 0.05
-NAMES = ("bandwidth", "keepout_aligned", "keepout_aligned_pallas", "keepout_other_res", "keepout_transform", "speed", "binary",
-         "zone", "inflation", "pipeline", "baseline_keepout", "baseline_speed", "fleet")
+NAMES = ("bandwidth", "keepout_aligned", "keepout_aligned_pallas", "keepout_other_res", "keepout_transform",
+         "speed", "binary", "zone", "inflation", "pipeline", "baseline_keepout", "baseline_speed", "fleet")
 
 
 def sizes(platform_name: str, quick: bool) -> dict:

@@ -760,7 +760,7 @@ def _pallas_batch(cost, data, sliced, idx, sx, sy, col_ok, row_ok, state, cells,
   `in_place`, whose kernel must not sit in a `lax.cond` branch (XLA would copy the
   costmap into the branch to update it there).
   """
-  b, h, w = cost.shape
+  h, w = cost.shape[1:]
 
   def kernel_then_gather():
     params = keepout_pallas.slice_params(idx, sx, sy, col_ok, row_ok, sliced, state.is_pose_lethal)
