@@ -34,8 +34,8 @@ from jaxfilters.grid import OccupancyGrid
 from benchmarks import nav2_peer
 
 RES = 0.05
-NAMES = ("bandwidth", "keepout_aligned", "keepout_other_res", "keepout_transform", "speed", "binary",
-         "zone", "inflation", "pipeline", "baseline_keepout", "baseline_speed", "fleet")
+NAMES = ("bandwidth", "keepout_aligned", "keepout_aligned_pallas", "keepout_other_res", "keepout_transform",
+         "speed", "binary", "zone", "inflation", "pipeline", "baseline_keepout", "baseline_speed", "fleet")
 
 
 def sizes(platform_name: str, quick: bool) -> dict:
@@ -145,16 +145,18 @@ def random_poses(seed, b, span):
 # ----------------------------------------------------------------------------- benches
 
 
-def bench_keepout(kind, sz, b):
+def bench_keepout(kind, sz, b, config=None):
   hw, n = sz["hw"], sz["mask"]
-  mask_res = {"keepout_aligned": RES, "keepout_other_res": 2 * RES, "keepout_transform": RES}[kind]
+  mask_res = {"keepout_aligned": RES, "keepout_aligned_pallas": RES, "keepout_other_res": 2 * RES,
+              "keepout_transform": RES}[kind]
   transform = kind == "keepout_transform"
   sets = [keepout_inputs(s, b, hw, n, mask_res, transform) for s in range(2)]
   state = jf.KeepoutState.create(b)
   poses = jnp.zeros((b, 3), jnp.float32)
+  config = jf.KeepoutConfig() if config is None else config
 
   def fn(cm, mask, tf):
-    out, st = jf.keepout_filter(cm, mask, poses, state, transform=tf)
+    out, st = jf.keepout_filter(cm, mask, poses, state, transform=tf, config=config)
     return out.cost, st
 
   outs = []
@@ -163,7 +165,7 @@ def bench_keepout(kind, sz, b):
                     after_warmup=lambda o: peer.prepare([x[0] for x in o]))
   cells = b * hw * hw
   fig = figure(kind, dict(B=b, H=hw, W=hw, mask=[n, n], mask_res=mask_res, costmap_res=RES,
-                          dtype="uint8 cost, int8 mask", transform=transform),
+                          dtype="uint8 cost, int8 mask", transform=transform, kernel=config.kernel),
                c, s, cells, "cells/s", bytes_per_cell=3)
   fig["cpp_peer"] = peer.result()
   try:   # which fast-path branches these inputs take (counts over the first 64 robots)
@@ -174,6 +176,15 @@ def bench_keepout(kind, sz, b):
   except Exception as e:  # noqa: BLE001 - a report, never a reason to lose the figure
     fig["paths"] = f"unavailable: {type(e).__name__}: {e}"
   return fig
+
+
+def bench_keepout_pallas(sz, b):
+  """keepout_aligned through the Pallas kernel (`KeepoutConfig(kernel="pallas")`, default tuning)."""
+  backend = jax.default_backend()
+  if backend != "gpu":
+    return dict(name="keepout_aligned_pallas", skipped=f"needs a GPU backend (the Pallas kernel lowers through "
+                                                       f"Triton); this run's backend is {backend!r}")
+  return bench_keepout("keepout_aligned_pallas", sz, b, config=jf.KeepoutConfig(kernel="pallas"))
 
 
 class PeerTimer:
@@ -448,6 +459,9 @@ def table(report) -> str:
     if "error" in r:
       lines.append(f"{name:22s} ERROR {r['error'][:90]}")
       continue
+    if "skipped" in r:
+      lines.append(f"{name:22s} skipped: {r['skipped'][:100]}")
+      continue
     if name == "fleet":
       lines.append(f"{name:22s} {json.dumps({k: v for k, v in r.items() if k in ('filters_on', 'bare_mjx')})[:150]}")
       continue
@@ -490,6 +504,7 @@ def main(argv=None) -> int:
   runners = {
       "bandwidth": lambda: bench_bandwidth(sz),
       "keepout_aligned": lambda: bench_keepout("keepout_aligned", sz, rb(sz["keepout_b"])),
+      "keepout_aligned_pallas": lambda: bench_keepout_pallas(sz, rb(sz["keepout_b"])),
       "keepout_other_res": lambda: bench_keepout("keepout_other_res", sz, rb(sz["keepout_b"])),
       "keepout_transform": lambda: bench_keepout("keepout_transform", sz, rb(sz["keepout_b"])),
       "speed": lambda: bench_point_filter("speed", sz, rb(sz["filter_b"])),
@@ -519,14 +534,15 @@ def main(argv=None) -> int:
 
   bw_fig = results.get("bandwidth", {})
   bw = bw_fig.get("roofline_bytes_per_s", bw_fig.get("throughput"))
-  for name in ("keepout_aligned", "keepout_other_res", "keepout_transform", "pipeline"):
+  for name in ("keepout_aligned", "keepout_aligned_pallas", "keepout_other_res", "keepout_transform", "pipeline"):
     r = results.get(name)
     if r and "throughput" in r and bw and name != "pipeline":
       r["roofline_pct"] = 100.0 * r["throughput"] * 3 / bw
     base = results.get("baseline_keepout", {}).get("throughput")
     if r and "throughput" in r and base and name.startswith("keepout"):
       r["speedup_vs_numpy"] = r["throughput"] / base
-  for name in ("keepout_aligned", "keepout_other_res", "keepout_transform", "baseline_keepout"):
+  for name in ("keepout_aligned", "keepout_aligned_pallas", "keepout_other_res", "keepout_transform",
+               "baseline_keepout"):
     r = results.get(name)
     peer = (r or {}).get("cpp_peer", {})
     if "throughput" in (r or {}) and "throughput" in peer:

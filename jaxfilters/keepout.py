@@ -51,6 +51,8 @@ import numpy as np
 
 from jaxfilters import constants
 from jaxfilters import geometry
+from jaxfilters import keepout_pallas
+from jaxfilters.keepout_pallas import PallasTuning
 from jaxfilters.types import Costmap, FilterMask, _dataclass, check_costmap, per_robot_bool, robot_inputs
 
 _F32 = jnp.float32
@@ -92,12 +94,24 @@ class KeepoutConfig:
       resolutions up to the float32 rounding of the mask's); False always
       gathers them through the two index vectors. The choice is made at run
       time (`lax.cond`), so both are compiled.
+    kernel: what runs the aligned path's cells: "xla" (one fused XLA loop, every
+      backend), "pallas" (the Triton kernel of `jaxfilters.keepout_pallas`, same
+      integers; needs a GPU backend, or `pallas.interpret=True`, else
+      `keepout_filter` raises) or "auto" (Pallas on a GPU backend, XLA
+      elsewhere). The gather and other-frame paths are XLA either way.
+    pallas: static `keepout_pallas.PallasTuning` of the kernel (layout, block,
+      warps, interpreter).
   """
   override_lethal_cost: bool = False
   lethal_override_cost: int = constants.MAX_NON_OBSTACLE
   aligned_fast_path: bool = True
+  kernel: str = "xla"
+  pallas: PallasTuning = PallasTuning()
 
   def __post_init__(self):
+    keepout_pallas.check_kernel(self.kernel)
+    if not isinstance(self.pallas, PallasTuning):
+      raise ValueError(f"pallas must be a keepout_pallas.PallasTuning; got {type(self.pallas).__name__}")
     if not isinstance(self.aligned_fast_path, (bool, np.bool_)):
       raise ValueError(f"aligned_fast_path must be a bool; got {self.aligned_fast_path!r}")
     object.__setattr__(self, "aligned_fast_path", bool(self.aligned_fast_path))
@@ -688,6 +702,10 @@ def _same_frame_batch(costmap, mask, idx, idx_ok, state, window, enabled, *, con
                                                                       st, config=config)
   cells = (costmap.cost, idx, mx, vx, my, vy, col_ok, row_ok, state)
 
+  table_bytes = m * (hm + 2 * h) * (wm + 2 * w)
+  if keepout_pallas.use_pallas(config.kernel, config.pallas, table_bytes=table_bytes):
+    return _pallas_batch(costmap.cost, mask.data, sliced, idx, sx, sy, col_ok, row_ok, state, cells, gather,
+                         config=config), new_state
   if loop == "map":
     def all_sliced():
       padded = jnp.pad(mask.data, ((0, 0), (h, h), (w, w)), constant_values=-1)
@@ -716,8 +734,7 @@ def _same_frame_batch(costmap, mask, idx, idx_ok, state, window, enabled, *, con
     raise ValueError(f"the packed keepout path needs a costmap width divisible by 4; got W = {w}")
 
   def by_slice():
-    table = jnp.asarray(_COST1)[jax.lax.bitcast_convert_type(mask.data, jnp.uint8).astype(jnp.int32)]
-    table = jnp.pad(table, ((0, 0), (h, h), (w, w)))
+    table = _cost_plus_one_table(mask.data, h, w)
     if packed:
       words = _shifted_words(table)
       one = lambda c, i, x, y, co, ro, st: _aligned_packed_one(c, words, i, x, y, co, ro, st, config=config)
@@ -726,6 +743,38 @@ def _same_frame_batch(costmap, mask, idx, idx_ok, state, window, enabled, *, con
     return jax.vmap(one)(costmap.cost, idx, sx, sy, col_ok, row_ok, state)
 
   return jax.lax.cond(jnp.all(sliced), by_slice, lambda: jax.vmap(gather)(*cells)), new_state
+
+
+def _cost_plus_one_table(data, h, w):
+  """uint8 [M, Hm + 2H, Wm + 2W]: the masks' (cost + 1) bytes (`_COST1`) padded with 0 (unknown)."""
+  table = jnp.asarray(_COST1)[jax.lax.bitcast_convert_type(data, jnp.uint8).astype(jnp.int32)]
+  return jnp.pad(table, ((0, 0), (h, h), (w, w)))
+
+
+def _pallas_batch(cost, data, sliced, idx, sx, sy, col_ok, row_ok, state, cells, gather, *, config: KeepoutConfig):
+  """The same-frame cells with the Pallas kernel on the sliced robots (`KeepoutConfig.kernel`).
+
+  The kernel writes the sliced robots and passes the others through; those are
+  then gathered from its result (their cells are still the old ones), only when
+  there are any. A fleet with no sliced robot is gathered at once, except with
+  `in_place`, whose kernel must not sit in a `lax.cond` branch (XLA would copy the
+  costmap into the branch to update it there).
+  """
+  h, w = cost.shape[1:]
+
+  def kernel_then_gather():
+    params = keepout_pallas.slice_params(idx, sx, sy, col_ok, row_ok, sliced, state.is_pose_lethal)
+    out = keepout_pallas.aligned_write(cost, _cost_plus_one_table(data, h, w), params,
+                                       escape=config.override_lethal_cost,
+                                       lethal_cost=config.lethal_override_cost, tuning=config.pallas)
+
+    def rest(out):
+      return _tree_where(sliced, out, jax.vmap(gather)(out, *cells[1:]))
+    return jax.lax.cond(jnp.all(sliced), lambda o: o, rest, out)
+
+  if config.pallas.in_place:
+    return kernel_then_gather()
+  return jax.lax.cond(jnp.any(sliced), kernel_then_gather, lambda: jax.vmap(gather)(*cells))
 
 
 # ----------------------------------------------------------------------------- other frame, fast
@@ -984,9 +1033,12 @@ def keepout_filter(costmap: Costmap, mask: FilterMask, poses, state: KeepoutStat
   Raises:
     TypeError / ValueError: inputs of the wrong type, dtype or shape (e.g. a
       Costmap whose cost is not uint8), or a concrete mask_index out of range.
+    ValueError: `config.kernel="pallas"` on a backend other than GPU without
+      `PallasTuning(interpret=True)`.
   """
   if not isinstance(config, KeepoutConfig):
     raise TypeError(f"config must be a KeepoutConfig; got {type(config).__name__}")
+  keepout_pallas.use_pallas(config.kernel, config.pallas)   # kernel="pallas" off GPU raises here
   idx, idx_ok, poses, enabled, window, transform = _batched_inputs(
       costmap, mask, poses, mask_index, enabled, window, transform, "keepout_filter")
   del poses

@@ -1,0 +1,331 @@
+"""A Pallas (Triton) kernel for the aligned same-frame keepout write (issue 9 item 3).
+
+The aligned path of `keepout.keepout_filter` reads each robot's mask cells as one
+[H, W] window of the masks' (cost + 1) table (`keepout.mask_cost_plus_one_table`,
+padded by H rows and W columns of 0 = unknown) at a start (sx, sy), and applies
+Nav2's rule `mask != 255 and (mask > old or old == 255)`, which on (x + 1) bytes
+is `m1 > c1` (see `keepout._aligned_one`). XLA runs it as one fused loop; this
+module runs it as one Triton kernel over the fleet: each costmap byte is read and
+written once (or, with `PallasTuning(in_place=True)`, updated in place where the
+caller donates the costmap), and the mask window is read from the table, a few
+MB that stay in L2.
+
+Two layouts of a program's work (`PallasTuning.layout`); both read the uint8
+costmap as it is (an XLA bitcast to uint32 words would be a copy pass on GPU:
+XLA expands bitcast-converts between widths into arithmetic):
+
+* "flat": a program takes `rows = block_cells // W` whole rows of one robot as one
+  contiguous run of `rows * W` bytes (padded to a power of two, the tail masked):
+  with H * W and rows * W multiples of 16 every costmap access is a 16-byte vector;
+  the row and column of each cell come from a division by the static W.
+* "rows": a program takes a [R, C] block (R rows, C = next power of two >= W
+  columns, masked): no division, but a row starts at a multiple of
+  gcd(W, 16) bytes, so the vectors are that wide.
+
+Cells outside a robot's window [x0, x1) x [y0, y1) (Nav2's clipped update
+window), and every cell of a robot the caller does not hand to the kernel, read
+no mask byte and keep their value: written back unchanged by default; with
+`in_place` not touched at all where a whole row (rows layout) or robot (both)
+lies outside. The result is the same integers as the XLA aligned path
+(tests/test_keepout_pallas.py runs the kernel in the Pallas interpreter against
+it and against a float64 reference; benchmarks/pallas_probe.py checks it on a GPU).
+
+Pallas's Triton backend computes addresses in 32-bit signed arithmetic for an
+array below 4 GiB, so a costmap batch of 2 GiB or more is run in chunks of robots
+(a copy of each chunk in and out: slower, still exact) and a table of 2 GiB or
+more is refused.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+
+KERNELS = ("auto", "xla", "pallas")
+LAYOUTS = ("flat", "rows")
+NUM_PARAMS = 8            # per-robot int32 scalars: i, sx, sy, x0, x1, y0, y1, lethal
+# Largest arrays whose 32-bit signed offsets stay exact (the table is refused beyond, the
+# costmap batch split into chunks of robots).
+_MAX_TABLE_BYTES = (1 << 31) - 1
+_MAX_COST_BYTES = (1 << 31) - 1
+
+
+@dataclasses.dataclass(frozen=True)
+class PallasTuning:
+  """Static settings of the Pallas keepout kernel (they change the compiled program).
+
+  Attributes:
+    layout: "flat" (whole rows as one contiguous run, 16-byte vectors when the
+      row run is a multiple of 16 bytes) or "rows" (a [R, next_pow2(W)] block).
+    block_cells: cells per program, a power of two in [16, 65536]: "flat" takes
+      max(1, block_cells // W) rows, "rows" max(1, block_cells // next_pow2(W)).
+    num_warps: warps per program (1, 2, 4, 8, 16 or 32).
+    num_stages: Triton software-pipelining stages (1..8; the kernel has no loop,
+      so this rarely matters).
+    in_place: update the costmap in place (`input_output_aliases`): cells outside
+      a robot's window, and robots the kernel does not take, are neither read
+      nor written. Only a caller that donates the costmap gains (no second
+      buffer); without donation XLA first copies the costmap, a whole extra
+      pass. False (default) writes a new costmap: every cell read and written
+      once, whatever the caller donates.
+    interpret: run the kernel in the Pallas interpreter (XLA on any backend,
+      slow; for tests on CPU). `KeepoutConfig(kernel="pallas")` on a backend
+      other than GPU raises unless this is True.
+  """
+  layout: str = "flat"
+  block_cells: int = 2048
+  num_warps: int = 4
+  num_stages: int = 1
+  in_place: bool = False
+  interpret: bool = False
+
+  def __post_init__(self):
+    if self.layout not in LAYOUTS:
+      raise ValueError(f"PallasTuning.layout must be one of {LAYOUTS}; got {self.layout!r}")
+    for name, ok, want in (
+        ("block_cells", lambda v: 16 <= v <= 65536 and v & (v - 1) == 0, "a power of two in [16, 65536]"),
+        ("num_warps", lambda v: v in (1, 2, 4, 8, 16, 32), "one of 1, 2, 4, 8, 16, 32"),
+        ("num_stages", lambda v: 1 <= v <= 8, "an int in [1, 8]")):
+      v = getattr(self, name)
+      if isinstance(v, (bool, np.bool_)) or not isinstance(v, (int, np.integer)) or not ok(int(v)):
+        raise ValueError(f"PallasTuning.{name} must be {want}; got {v!r}")
+      object.__setattr__(self, name, int(v))
+    for name in ("in_place", "interpret"):
+      v = getattr(self, name)
+      if not isinstance(v, (bool, np.bool_)):
+        raise ValueError(f"PallasTuning.{name} must be a bool; got {v!r}")
+      object.__setattr__(self, name, bool(v))
+
+
+def check_kernel(kernel) -> str:
+  """`kernel` if it is one of KERNELS, else ValueError naming the expected values."""
+  if not isinstance(kernel, str) or kernel not in KERNELS:
+    raise ValueError(f"kernel must be one of {KERNELS}; got {kernel!r}")
+  return kernel
+
+
+def use_pallas(kernel: str, tuning: PallasTuning, *, table_bytes: int = 0, backend: str | None = None) -> bool:
+  """Whether the aligned keepout write runs the Pallas kernel (decided at trace time).
+
+  Args:
+    kernel: "xla" (never), "pallas" (always; raises where it cannot run) or
+      "auto" (on a GPU backend, when the table fits; XLA otherwise).
+    tuning: the PallasTuning (its `interpret` lets "pallas" run off GPU).
+    table_bytes: size of the (cost + 1) mask table the kernel would read.
+    backend: the backend to decide for; default `jax.default_backend()`.
+
+  Raises:
+    ValueError: kernel="pallas" on a backend other than GPU without
+      `interpret=True` (no silent slow path), or a table of 2 GiB or more.
+  """
+  check_kernel(kernel)
+  if kernel == "xla":
+    return False
+  backend = jax.default_backend() if backend is None else backend
+  fits = table_bytes <= _MAX_TABLE_BYTES
+  if kernel == "auto":
+    return backend == "gpu" and fits
+  if backend != "gpu" and not tuning.interpret:
+    raise ValueError(
+        f"KeepoutConfig(kernel='pallas') needs a GPU backend (the kernel lowers through Triton); "
+        f"the default backend is {backend!r}. Use kernel='xla' or 'auto', or "
+        f"PallasTuning(interpret=True) to run the kernel in the (slow) Pallas interpreter")
+  if not fits:
+    raise ValueError(f"the Pallas keepout kernel reads the mask table with 32-bit offsets: it must be "
+                     f"< 2 GiB; got {table_bytes} bytes (masks M x (Hm + 2H) x (Wm + 2W)). "
+                     f"Use kernel='xla'")
+  return True
+
+
+def slice_params(idx, sx, sy, col_ok, row_ok, take, lethal) -> jax.Array:
+  """Per-robot kernel scalars from the aligned path's prologue: int32 [B, NUM_PARAMS].
+
+  Args:
+    idx: int32 [B] mask index. sx, sy: int32 [B] window start in the table.
+    col_ok: bool [B, W], row_ok: bool [B, H]: the half-open update window as
+      flags (`keepout._window_flags`: each a contiguous run; row_ok all False
+      for a robot that does not run).
+    take: bool [B], robots the kernel writes (others keep their cost).
+    lethal: bool [B], `state.is_pose_lethal` (used in escape mode only).
+
+  Returns:
+    int32 [B, 8] rows (i, sx, sy, x0, x1, y0, y1, lethal); y0 == y1 == 0 for a
+    robot with nothing to write.
+  """
+  def bounds(ok):
+    n = jnp.sum(ok.astype(jnp.int32), axis=1)
+    lo = jnp.where(n > 0, jnp.argmax(ok, axis=1).astype(jnp.int32), 0)
+    return lo, lo + n
+
+  x0, x1 = bounds(col_ok)
+  y0, y1 = bounds(row_ok & take[:, None])
+  empty = (x1 <= x0) | (y1 <= y0)
+  y0, y1 = jnp.where(empty, 0, y0), jnp.where(empty, 0, y1)
+  cols = (idx, sx, sy, x0, x1, y0, y1, lethal)
+  return jnp.stack([jnp.asarray(c).astype(jnp.int32) for c in cols], axis=1)
+
+
+def _rule(c, m1, lethal, *, escape: bool, lethal_cost: int):
+  """Nav2's write rule on uint8 cells c and mask (cost + 1) bytes m1 (0 = do not write)."""
+  c1 = c + jnp.uint8(1)
+  if escape:
+    value = jnp.where(lethal != 0, jnp.uint8(lethal_cost), m1 - jnp.uint8(1))
+    return jnp.where(m1 > c1, value, c)
+  return jnp.maximum(c1, m1) - jnp.uint8(1)
+
+
+def _pallas():
+  """(pallas, pallas.triton), imported on first use: `import jaxfilters` does not load Pallas."""
+  from jax.experimental import pallas as pl  # noqa: PLC0415
+  from jax.experimental.pallas import triton as plgpu  # noqa: PLC0415
+  return pl, plgpu
+
+
+def _params(p_ref, r):
+  return [p_ref[r, k] for k in range(NUM_PARAMS)]
+
+
+def _in_range(v, lo, hi):
+  """lo <= v < hi for int32 v and lo <= hi, as one unsigned compare."""
+  return (v - lo).astype(jnp.uint32) < (hi - lo).astype(jnp.uint32)
+
+
+def _flat_kernel(p_ref, cost_ref, tab_ref, out_ref, *, h, w, plane, pitch, rows, span, nblk, escape, lethal_cost,
+                 in_place):
+  pl, plgpu = _pallas()
+  pid = pl.program_id(0)
+  r, row0 = jax.lax.div(pid, nblk), jax.lax.rem(pid, nblk) * rows
+  i, sx, sy, x0, x1, y0, y1, lethal = _params(p_ref, r)
+  e = jnp.arange(span, dtype=jnp.int32)
+  start = row0 * w
+  # Bounds on the contiguous index only (and a per-robot scalar), so Triton can keep
+  # the costmap access vectorised; the window is applied on the mask read.
+  live = (e < rows * w) & (start + e < h * w)
+  if in_place:
+    live = live & (y1 > y0)
+  q = jax.lax.div(e.astype(jnp.uint32), jnp.uint32(w)).astype(jnp.int32)   # row within the run
+  col = e - q * w
+  c = plgpu.load(cost_ref.at[r, pl.ds(start, span)], mask=live, other=jnp.uint8(0))
+  visit = live & _in_range(row0 + q, y0, y1) & _in_range(col, x0, x1)
+  # The table as one flat run: cell (sy + row0 + q, sx + col) of mask i.
+  base = i * plane + (sy + row0) * pitch + sx
+  m1 = plgpu.load(tab_ref.at[base + e + q * (pitch - w)], mask=visit, other=jnp.uint8(0))
+  plgpu.store(out_ref.at[r, pl.ds(start, span)], _rule(c, m1, lethal, escape=escape, lethal_cost=lethal_cost),
+              mask=live)
+
+
+def _rows_kernel(p_ref, cost_ref, tab_ref, out_ref, *, h, rows, span, nblk, w, escape, lethal_cost, in_place):
+  pl, plgpu = _pallas()
+  pid = pl.program_id(0)
+  r, row0 = jax.lax.div(pid, nblk), jax.lax.rem(pid, nblk) * rows
+  i, sx, sy, x0, x1, y0, y1, lethal = _params(p_ref, r)
+  j = row0 + jnp.arange(rows, dtype=jnp.int32)
+  k = jnp.arange(span, dtype=jnp.int32)
+  # y1 <= H, so the row window also masks the rows past the costmap's last.
+  in_window = _in_range(j, y0, y1)[:, None] & (k < w)[None, :]
+  live = in_window if in_place else (j < h)[:, None] & (k < w)[None, :]
+  c = plgpu.load(cost_ref.at[r, pl.ds(row0, rows), pl.ds(0, span)], mask=live, other=jnp.uint8(0))
+  visit = in_window & _in_range(k, x0, x1)[None, :]
+  m1 = plgpu.load(tab_ref.at[i, pl.ds(sy + row0, rows), pl.ds(sx, span)], mask=visit, other=jnp.uint8(0))
+  plgpu.store(out_ref.at[r, pl.ds(row0, rows), pl.ds(0, span)],
+              _rule(c, m1, lethal, escape=escape, lethal_cost=lethal_cost), mask=live)
+
+
+def _next_pow2(n: int) -> int:
+  return 1 << max(0, (int(n) - 1).bit_length())
+
+
+def block_shape(h: int, w: int, tuning: PallasTuning) -> tuple[int, int, int]:
+  """(rows per program, padded lanes per row or per run, programs per robot) for H x W."""
+  if tuning.layout == "flat":
+    rows = max(1, min(h, tuning.block_cells // w))
+    return rows, _next_pow2(rows * w), -(-h // rows)
+  span = _next_pow2(w)
+  rows = min(_next_pow2(h), max(1, tuning.block_cells // span))
+  return rows, span, -(-h // rows)
+
+
+def aligned_write(cost, table, params, *, escape: bool, lethal_cost: int, tuning: PallasTuning) -> jax.Array:
+  """The aligned keepout write for a fleet in one Pallas kernel: new cost uint8 [B, H, W].
+
+  Same integers as `jax.vmap(keepout._aligned_one)` on the robots with a
+  non-empty window in `params`; the others keep their cost. With
+  `tuning.in_place` the result aliases `cost` (in place when the caller
+  donates it under `jit`, else XLA copies it first); otherwise it is a new
+  buffer with every cell written.
+
+  Args:
+    cost: uint8 [B, H, W] costmaps.
+    table: uint8 [M, Hm + 2H, Wm + 2W] the masks' (cost + 1) bytes padded with 0
+      (`keepout.mask_cost_plus_one_table`); a robot's window starts at (sx, sy),
+      0 <= sx <= Wm + W, 0 <= sy <= Hm + H.
+    params: int32 [B, 8] from `slice_params`.
+    escape: static, Nav2's override_lethal_cost (write `lethal_cost` where the
+      robot's `lethal` flag is set).
+    lethal_cost: static int in [0, 255].
+    tuning: static PallasTuning.
+
+  Returns:
+    uint8 [B, H, W].
+
+  Raises:
+    ValueError: wrong dtypes or shapes (static), a table of 2 GiB or more.
+  """
+  if cost.dtype != jnp.uint8 or cost.ndim != 3:
+    raise ValueError(f"cost must be uint8 [B, H, W]; got {cost.dtype}{tuple(cost.shape)}")
+  b, h, w = cost.shape
+  if table.dtype != jnp.uint8 or table.ndim != 3 or table.shape[1] < 2 * h or table.shape[2] < 2 * w:
+    raise ValueError(f"table must be uint8 [M, Hm + 2H, Wm + 2W] with H = {h}, W = {w}; "
+                     f"got {table.dtype}{tuple(table.shape)}")
+  if params.dtype != jnp.int32 or params.shape != (b, NUM_PARAMS):
+    raise ValueError(f"params must be int32 [{b}, {NUM_PARAMS}]; got {params.dtype}{tuple(params.shape)}")
+  if not 0 <= int(lethal_cost) <= 255:
+    raise ValueError(f"lethal_cost must be a cost in [0, 255]; got {lethal_cost!r}")
+  if table.size > _MAX_TABLE_BYTES:
+    raise ValueError(f"the mask table must be < 2 GiB for the kernel's 32-bit offsets; got {table.size} bytes")
+  if b == 0:
+    return cost
+  per_robot = h * w
+  chunk = max(1, _MAX_COST_BYTES // per_robot)
+  if b > chunk:
+    # Split so each call's arrays keep exact 32-bit offsets (see the module docstring).
+    parts = [aligned_write(cost[s:s + chunk], table, params[s:s + chunk], escape=escape,
+                           lethal_cost=lethal_cost, tuning=tuning) for s in range(0, b, chunk)]
+    return jnp.concatenate(parts, axis=0)
+  pl, plgpu = _pallas()
+  rows, span, nblk = block_shape(h, w, tuning)
+  statics = dict(h=h, w=w, rows=rows, span=span, nblk=nblk, escape=bool(escape), lethal_cost=int(lethal_cost),
+                 in_place=tuning.in_place)
+  if tuning.layout == "flat":
+    statics.update(plane=table.shape[1] * table.shape[2], pitch=table.shape[2])
+    kernel = lambda *refs: _flat_kernel(*refs, **statics)
+    operand = cost.reshape(b, h * w)
+    table = table.reshape(-1)
+  else:
+    kernel = lambda *refs: _rows_kernel(*refs, **statics)
+    operand = cost
+  call = pl.pallas_call(
+      kernel,
+      out_shape=jax.ShapeDtypeStruct(operand.shape, jnp.uint8),
+      grid=(b * nblk,),
+      input_output_aliases={1: 0} if tuning.in_place else {},
+      interpret=tuning.interpret,
+      compiler_params=plgpu.CompilerParams(num_warps=tuning.num_warps, num_stages=tuning.num_stages),
+      name=f"keepout_aligned_{tuning.layout}",
+  )
+  return call(params, operand, table).reshape(b, h, w)
+
+
+def cells_per_program(h: int, w: int, tuning: PallasTuning) -> dict:
+  """The block geometry a tuning gives on H x W (for the probe's report)."""
+  rows, span, nblk = block_shape(h, w, tuning)
+  lanes = span * (rows if tuning.layout == "rows" else 1)
+  # The widest aligned costmap access: programs start every rows * W bytes (flat) or
+  # rows start every W bytes (rows), robots every H * W bytes; Triton loads <= 16 bytes.
+  step = rows * w if tuning.layout == "flat" else w
+  return dict(rows_per_program=rows, lanes_per_program=lanes, programs_per_robot=nblk,
+              lane_use=round(min(rows, h) * w / lanes, 4), aligned_bytes=math.gcd(16, step, h * w))
