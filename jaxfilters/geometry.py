@@ -486,10 +486,10 @@ def world_to_index_checked(wx: jax.Array, wy: jax.Array, origin, resolution, wid
 # float32 comparisons, which round nothing. `edge_thresholds` builds the table,
 # `floor_by_edges` reads it.
 
-_EDGE_MIN_RES = 2.0 ** -40    # edge tables are trusted only for resolutions in [2**-40, 2**60]
+_EDGE_MIN_RES = 2.0 ** -40    # edge tables are trusted only for resolutions in [2**-40, 2**60],
 _EDGE_MAX_RES = 2.0 ** 60
-_EDGE_MIN_PART = 2.0 ** -90   # ... origin parts 0 or at least this large
-_EDGE_MIN_T = 2.0 ** -60      # ... and thresholds 0 or at least this large
+_EDGE_MIN_T = 2.0 ** -102     # thresholds 0 or with a magnitude in [2**-102, 2**100]
+_EDGE_MAX_T = 2.0 ** 100
 
 
 def float32_key(x: jax.Array) -> jax.Array:
@@ -543,11 +543,17 @@ def edge_thresholds(origin, resolution, size: int) -> tuple[jax.Array, jax.Array
   v - (origin + n res) (`expansion_sign`): T_n is the first that is not below the edge,
   and the table is trusted only where the first is below and the last is not, so an
   estimate that missed can only make the table untrusted, never wrong. An edge exactly
-  at 0 gives T_n = 0 (x >= 0 iff x >= the edge, for x = -0 too). The exact signs need no subnormal intermediate (XLA flushes them);
-  `trusted` also demands what makes that so and what `floor_by_edges`' proof needs:
-  res in [2**-40, 2**60], each origin part 0 or at least 2**-90 in magnitude, the
-  origin's lower parts at most res / 4, and every T_n 0 or at least 2**-60 in magnitude.
-  Grids outside that (none that a map file describes) must use the exact arithmetic.
+  at 0 gives T_n = 0 (x >= 0 iff x >= the edge, for x = -0 too).
+
+  The signs are exact when no sum or error term of the expansion is subnormal (XLA
+  flushes those): that holds when every term is a multiple of 2**-126 (then so is every
+  exact sum and error, and a non-zero one is at least 2**-126). A float32 of magnitude
+  2**-102 or more is such a multiple. `trusted` demands what makes that so and what
+  `floor_by_edges`' proof needs: res in [2**-40, 2**60] (the products n res are then
+  multiples of 2**-63), each origin part a multiple of 2**-126, the origin's lower parts
+  at most res / 4, and every T_n 0 or of a magnitude in [2**-102, 2**100] (so are the
+  candidates tested beside it). Grids outside that (none that a map file describes)
+  must use the exact arithmetic.
 
   Args:
     origin: float32 [...] (one axis of the origin, for a batch of grids) or a list of
@@ -565,8 +571,10 @@ def edge_thresholds(origin, resolution, size: int) -> tuple[jax.Array, jax.Array
   shape = jnp.broadcast_shapes(r.shape, *[p.shape for p in parts])
   parts = [jnp.broadcast_to(p, shape)[..., None] for p in parts]
   r = jnp.broadcast_to(r, shape)[..., None]
-  n = jnp.arange(size + 1, dtype=_F32)
-  terms = [jnp.broadcast_to(t, shape + (size + 1,)) for t in parts + exact_product(n, r)]
+  full = shape + (size + 1,)
+  n = jnp.broadcast_to(jnp.arange(size + 1, dtype=_F32), full)
+  parts = [jnp.broadcast_to(p, full) for p in parts]
+  terms = parts + exact_product(n, jnp.broadcast_to(r, full))
   c = _expansion_estimate(terms)
   c = c + _expansion_estimate(terms + [-c])
   k = float32_key(c)
@@ -577,10 +585,12 @@ def edge_thresholds(origin, resolution, size: int) -> tuple[jax.Array, jax.Array
   found = below[0] & ~below[-1]
   zero = expansion_sign(terms) == 0
   t_n = jnp.where(zero, jnp.float32(0), t_n)
-  good = (found & (jnp.abs(t_n) >= _EDGE_MIN_T)) | zero
+  good = (found & (jnp.abs(t_n) >= _EDGE_MIN_T) & (jnp.abs(t_n) <= _EDGE_MAX_T)) | zero
   part_ok = jnp.ones(shape, bool)
-  for p in parts:
-    part_ok = part_ok & ((p[..., 0] == 0) | (jnp.abs(p[..., 0]) >= _EDGE_MIN_PART))
+  for p in parts:      # a multiple of 2**-126: every float32 of at least 2**-102 is one
+    p = p[..., 0]
+    scaled = jnp.where(jnp.abs(p) < _EDGE_MIN_T, p, 0.0) * jnp.float32(2.0 ** 126)
+    part_ok = part_ok & (jnp.floor(scaled) == scaled)
   lower = sum((jnp.abs(p[..., 0]) for p in parts[1:]), jnp.zeros(shape, _F32))
   r0 = r[..., 0]
   trusted = (jnp.all(good, axis=-1) & part_ok & (r0 >= _EDGE_MIN_RES) & (r0 <= _EDGE_MAX_RES)
@@ -604,35 +614,34 @@ def floor_by_edges(x: jax.Array, origin_hi: jax.Array, inv: jax.Array, table: ja
   """Exact floor((x - origin) / res) of float32 x, clipped into [-1, size], by an edge table.
 
   Args:
-    x: float32 array (points on this axis).
+    x: float32 array (points on this axis; XLA reads a subnormal as 0, as every path does).
     origin_hi: float32 [] the origin's leading part. inv: float32 [] from `edge_reciprocal`.
     table: float32 flat array holding `edge_thresholds` tables (size + 3 entries each);
       offset: int32 [] where this grid's table starts. size: static cell count (<= 2**17).
 
   Returns:
     int32 like x: n with 0 <= n < size where x lies on the grid, in cell n; -1 below
-    it, or for NaN; size above it (or +inf: size + 1). Exact where the table is trusted
-    and `edge_reciprocal`'s flag holds; every comparison is between float32 values,
-    so no rounding, FMA contraction or fusion choice can move a point across an edge.
+    it, or for NaN; size above it (+inf: size + 1). Exact where the table is trusted
+    and `edge_reciprocal`'s flag holds: the one decision is a comparison of two float32
+    values, so no rounding, FMA contraction or fusion choice can move a point across an
+    edge. One table read per point.
 
   Proof: with q = (x - origin) / res and q' = (x - origin_hi) / res, the trusted table
-  gives |q' - q| <= 1/4; est = fl(fl(x - origin_hi) * inv) = q'(1 + d), |d| <= 12u
-  (u = 2**-24: two roundings and the reciprocal's 9u), flushed subnormals adding
-  nothing that matters (|x - origin_hi| < 2**-126 is a quotient below 2**-86). If
-  |q| <= 2**18, |est - q| < 0.44, so n0 = clip(floor(est), -1, size) is within one of
-  n* = clip(floor(q), -1, size) (clip is 1-Lipschitz); if q > 2**18 (or x = +inf),
-  est > size + 1 and n0 = n* = size; if q < -2**18, est < 0 and n0 = n* = -1. Since
-  x >= T_n iff floor(q) >= n, with entry -1 = -inf and entry size + 1 = +inf,
-  x >= table(n) iff n* >= n for every n in [-1, size + 1]; so
-  n0 - [x < table(n0)] + [x >= table(n0 + 1)] is n* for each of n0 = n* - 1, n*, n* + 1
-  (the +inf point alone lands on size + 1).
+  gives |q' - q| <= 1/4. The float32 value e of (x - origin_hi) * inv - 0.5, with or
+  without FMA contraction, satisfies |e - (q' - 1/2)| <= 13u(|q'| + 1) (u = 2**-24: the
+  difference, the product and the sum each round once, the reciprocal errs by 9u; a
+  flushed subnormal difference is a quotient below 2**-86). Let f = floor(q) and
+  n* = clip(f, -1, size). If |q| <= 2**18, |e - (q - 1/2)| < 0.21 + 0.25 < 1/2, so e lies
+  in (q - 1, q), floor(e) is f - 1 or f, and n0 = clip(floor(e), -1, size) is n* - 1 or
+  n* (clip is monotone and 1-Lipschitz). If q > 2**18 (or x = +inf), e > 2**18 - 1 >=
+  size and n0 = n* = size; if q < -2**18, e < 0 and n0 = n* = -1. Since x >= T_n iff
+  f >= n, and entry size + 1 is +inf, [x >= table(n0 + 1)] = [n* >= n0 + 1] for every
+  n0 in [-1, size], so n0 + [x >= table(n0 + 1)] is n* either way (the +inf point alone
+  lands on size + 1).
   """
   if not 0 < size <= 2 ** 17:
     raise ValueError(f"floor_by_edges needs 0 < size <= 2**17; got {size}")
   x = jnp.asarray(x, _F32)
-  est = jnp.floor((x - origin_hi) * inv)
+  est = jnp.floor((x - origin_hi) * inv - 0.5)
   n0 = jnp.where(x == x, jnp.clip(est, -1.0, float(size)), -1.0).astype(jnp.int32)
-  at = offset + n0 + 1
-  below = x < table[at]
-  above = x >= table[at + 1]
-  return n0 - below.astype(jnp.int32) + above.astype(jnp.int32)
+  return n0 + (x >= table[offset + n0 + 2]).astype(jnp.int32)

@@ -990,7 +990,8 @@ def _se2_batch(costmap, mask, idx, idx_ok, state, window, enabled, transform, *,
                loop: str, impl: str | None = None):
   """The fast other-frame keepout over a fleet: same integers as the exact path.
 
-  `impl` (one of `_SE2_IMPLS`; None reads `_SE2_IMPL`) picks the kernel:
+  `impl` (one of `_SE2_IMPLS`; None reads `_SE2_IMPL_CPU` on the CPU backend and
+  `_SE2_IMPL` on the others) picks the kernel:
 
   * "codes": two passes, the cells' codes (`_se2_codes_one`, written out so that XLA
     does not fuse the arithmetic into the gather, which runs it several times slower on
@@ -1005,7 +1006,8 @@ def _se2_batch(costmap, mask, idx, idx_ok, state, window, enabled, transform, *,
     never for a map file's values) run the exact per-cell path. "_packed" works on
     four cells per uint32 word (W % 4 != 0 runs "thresholds").
   """
-  impl = _SE2_IMPL if impl is None else impl
+  if impl is None:
+    impl = _SE2_IMPL_CPU if jax.default_backend() == "cpu" else _SE2_IMPL
   if impl not in _SE2_IMPLS:
     raise ValueError(f"impl must be one of {_SE2_IMPLS}; got {impl!r}")
   if loop not in ("map", "vmap"):
@@ -1098,7 +1100,12 @@ def _se2_batch(costmap, mask, idx, idx_ok, state, window, enabled, transform, *,
 # So the other-frame path needs no undecided-cell flag, no reduction and no second pass.
 
 _SE2_IMPLS = ("codes", "fused", "thresholds", "thresholds_packed")
-_SE2_IMPL = "codes"   # the kernel `keepout_filter` runs with a transform (see `_se2_batch`)
+# The kernel `keepout_filter` runs with a transform (see `_se2_batch`), off the CPU and on
+# it. benchmarks/keepout_probe.py times them all on a GPU; flip `_SE2_IMPL` to its winner.
+# On XLA:CPU (2-core VM, B = 256, 200x200, 2000x2000 mask) "codes" ran 37 ms, "thresholds"
+# 60 ms: XLA:CPU does not vectorise a loop that reads a table, so the CPU keeps "codes".
+_SE2_IMPL = "codes"
+_SE2_IMPL_CPU = "codes"
 
 
 def _se2_edge_tables(mask: FilterMask):
