@@ -1,32 +1,41 @@
 """Where the other-resolution and other-frame (SE2) keepout paths spend their time, on one device.
 
-    python -m benchmarks.keepout_probe [--robots 16384] [--hw 200] [--mask 2000] [--repeats 7]
-                                       [--budget-s 200] [--only other_res,se2] [--out FILE]
+    python -m benchmarks.keepout_probe --out $OUT/keepout_probe.json
+        [--robots 16384] [--hw 200] [--mask 2000] [--repeats 7] [--budget-s 180]
+        [--only other_res,se2] [--no-edges] [--list]
 
-One call prints one JSON object on stdout (progress on stderr). For each figure
-(`other_res`: costmap 0.05 m as Nav2's double against a 0.1 m float32 mask, same frame;
-`se2`: 0.05 m against 0.05 m with each window turned about its centre by any yaw; both
-B robots of H x W over one Hm x Hm mask, windows at random places, as
+Prints one compact JSON object on stdout (a few KB, so it survives a log tail) and, with
+--out, writes the full one (per-run times, per-fleet edge counts, tracebacks), rewritten
+after every variant so a timeout keeps what was measured. Progress goes to stderr.
+
+For each figure (`other_res`: costmap 0.05 m as Nav2's double against a 0.1 m float32
+mask, same frame; `se2`: 0.05 m against 0.05 m with each window turned about its centre
+by any yaw; B robots of H x W over one Hm x Hm mask, windows at random places, as in
 benchmarks/run.py's keepout figures) it
 
 1. runs the exact per-cell path (`_keepout_filter_jit(exact=True)`) once: the reference;
 2. for every variant: compiles it (reported apart), runs it on the first input set and
-   counts the cells (and escape-mode flags) that differ from the reference, then times
-   it (median of `repeats` runs over two input sets, after `block_until_ready`).
-   A variant that should be exact ("current", "candidate") and differs is reported with
-   its count and `valid: false`; ablations and ceilings change the work on purpose, so
-   their counts are for information;
-3. checks every exact variant (plain and escape mode) against the exact path on small
-   "edge" fleets built so that cell centres lie exactly on mask-cell edges and one ulp
-   off them (`edge_check`), where the device's FMA contraction, division and
-   flush-to-zero could move a cell.
+   counts the cells (and escape flags) that differ from the reference, then times it
+   (median of `repeats` runs alternating two input sets, after `block_until_ready`).
+   A variant that should be exact ("current", "candidate") and differs gets `valid:
+   false` (its time is reported but `summary` never picks it); ablations and ceilings
+   change the work on purpose, so their counts are for information;
+3. checks the current path and every candidate, plain and escape mode, against the exact
+   path on small "edge" fleets whose cell centres lie exactly on mask-cell edges and one
+   ulp off them (`edge_check`, `edge_valid`): the device's FMA contraction, division and
+   flush-to-zero are what could move a cell there.
 
-Each variant is caught on its own: an error is reported in its entry and the rest go
-on. A variant that would start after `--budget-s` seconds is reported as skipped, so the
-whole call stays inside the device tool's limit (about 2-3 minutes on an H100 with the
-defaults; the slowest part is compiling ~25 programs).
+The phases run in that order over both figures (current and candidates first, then the
+ablations, then the edge checks), each variant caught on its own: an error is reported in
+its entry and the rest go on; a variant that would start after --budget-s seconds is
+reported as skipped. With the defaults the whole call should take about 2-3 minutes on an
+H100 (compiling ~30 programs is most of it).
 
-Variants (kind): see VARIANTS below; `python -m benchmarks.keepout_probe --list` prints them.
+`summary` in each figure names the fastest candidate that is bit-equal on the timed inputs
+and on the edge fleets, beside the current path. To make it the default, set in
+jaxfilters/keepout.py `_GATHER_IMPL` (other resolution: "gather" | "packed" | "rows" |
+"window") or `_SE2_IMPL` (other frame, non-CPU backends: "codes" | "fused" | "thresholds"
+| "thresholds_packed"; `_SE2_IMPL_CPU` for the CPU backend).
 """
 
 from __future__ import annotations
@@ -548,8 +557,8 @@ def main(argv=None) -> int:
   if unknown:
     ap.error(f"unknown --only figures {unknown}; choose from {sorted(VARIANTS)}")
   cpu = jax.default_backend() == "cpu"
-  args.robots = args.robots or (64 if cpu else 16384)
-  args.mask = args.mask or (500 if cpu else 2000)
+  args.robots = (64 if cpu else 16384) if args.robots is None else args.robots
+  args.mask = (500 if cpu else 2000) if args.mask is None else args.mask
   if args.robots < 1 or args.hw < 4 or args.hw % 4 or args.mask < 8:
     ap.error(f"need --robots >= 1, --hw >= 4 and a multiple of 4, --mask >= 8; got {args.robots}, {args.hw}, "
              f"{args.mask}")
@@ -557,7 +566,8 @@ def main(argv=None) -> int:
   d = jax.devices()[0]
   report = dict(probe="keepout_probe", device=dict(platform=d.platform, device_kind=d.device_kind, jax=jax.__version__,
                                                    python=platform.python_version()),
-                defaults=dict(SE2_IMPL=ko._SE2_IMPL, GATHER_IMPL=ko._GATHER_IMPL), budget_s=args.budget_s, figures={})
+                defaults=dict(SE2_IMPL=ko._SE2_IMPL, SE2_IMPL_CPU=ko._SE2_IMPL_CPU, GATHER_IMPL=ko._GATHER_IMPL),
+                budget_s=args.budget_s, figures={})
   state = {}
   for name in only:
     try:
@@ -606,12 +616,33 @@ def main(argv=None) -> int:
     if "variants" in fig:
       fig["summary"] = summary(fig)
   report["total_s"] = round(time.perf_counter() - t0, 1)
-  text = json.dumps(report, default=str)
   if args.out:
     with open(args.out, "w") as f:
-      f.write(text + "\n")
-  print(text)
+      f.write(json.dumps(report, default=str) + "\n")
+  print(json.dumps(compact(report), default=str, separators=(",", ":")))
   return 0
+
+
+def compact(report):
+  """The report without per-run times, traces and per-fleet counts (a few KB: it fits a log tail)."""
+  keep = ("name", "kind", "compile_s", "gcells_per_s", "diff_cells", "diff_escape_flags", "valid", "edge_valid",
+          "hlo_kernels", "skipped", "error")
+  out = dict(report, figures={})
+  for name, fig in report["figures"].items():
+    small = {k: v for k, v in fig.items() if k not in ("variants", "trace")}
+    rows = []
+    for v in fig.get("variants", []):
+      row = {k: v[k] for k in keep if k in v}
+      if "steady_s" in v:
+        row["steady_ms"] = round(1e3 * v["steady_s"], 4)
+      if isinstance(v.get("edge_check"), str):
+        row["edge_check"] = v["edge_check"]
+      if "error" in row:
+        row["error"] = row["error"][:200]
+      rows.append(row)
+    small["variants"] = rows
+    out["figures"][name] = small
+  return out
 
 
 if __name__ == "__main__":
