@@ -730,155 +730,6 @@ def _same_frame_batch(costmap, mask, idx, idx_ok, state, window, enabled, *, con
   return jax.lax.cond(jnp.all(sliced), by_slice, other), new_state
 
 
-# ----------------------------------------------------------------------------- same frame, other resolution
-#
-# A fleet whose mask cells are not one slice (another mask resolution) reads them through
-# the two exact index vectors. The kernels below read the same cells in different orders;
-# benchmarks/keepout_probe.py times them side by side on a GPU, and `_GATHER_IMPL` picks
-# the one `keepout_filter` runs (flip it there once the probe has picked a winner):
-#
-#   "gather"  one byte gather per cell through both vectors, uint8 write rule (the default);
-#   "packed"  four cells per uint32 word: four byte gathers from the (cost + 1) table, the
-#             write rule in SWAR word arithmetic, whole-word loads and stores of the costs
-#             (XLA:GPU moves bytes one at a time in an elementwise loop); W % 4 != 0 runs
-#             "gather";
-#   "rows"    two steps: the mask row each costmap row reads, W columns from the first
-#             mask column the robot reads (a [H, W] slab of contiguous row slices), then
-#             the columns inside the slab;
-#   "window"  the box of mask cells the robot reads, one [H, W] dynamic slice, then a
-#             gather inside it.
-#
-# "rows" and "window" need the cells a robot reads to span at most W columns and H rows
-# (a mask as coarse as the costmap or coarser); a fleet with a robot beyond that runs
-# "gather" (one batch-wide branch). Every kernel gives "gather"'s integers
-# (tests/test_keepout_paths.py).
-
-_GATHER_IMPLS = ("gather", "packed", "rows", "window")
-_GATHER_IMPL = "gather"
-
-
-def _m1_table(data):
-  """uint8 [M, Hm, Wm]: each mask cell's cost + 1, 0 where unknown (`mask_cost_plus_one_table`)."""
-  return jnp.asarray(_COST1)[jax.lax.bitcast_convert_type(data, jnp.uint8).astype(jnp.int32)]
-
-
-def _m1_rule_u8(cost, m1, state, config: KeepoutConfig):
-  """Nav2's write rule on (mask cost + 1) bytes m1 (0: unknown or not visited), uint8 [H, W]."""
-  c1 = cost + jnp.uint8(1)
-  if config.override_lethal_cost:
-    value = jnp.where(state.is_pose_lethal, jnp.uint8(config.lethal_override_cost), m1 - jnp.uint8(1))
-    return jnp.where(m1 > c1, value, cost)
-  return jnp.maximum(c1, m1) - jnp.uint8(1)
-
-
-def _packed_rule(c, m1, state, config: KeepoutConfig):
-  """`_m1_rule_u8` on uint32 words of four cells (SWAR, see `_aligned_packed_one`)."""
-  write = _bytes_less_than(_bytes_plus_one(c), m1)
-  if config.override_lethal_cost:
-    value = jnp.where(state.is_pose_lethal, _u32(config.lethal_override_cost * _ONES), _bytes_minus_one(m1))
-  else:
-    value = _bytes_minus_one(m1)
-  return (c & ~write) | (value & write)
-
-
-def _word(byte_planes):
-  """uint32 word from four uint8 arrays (byte s of the word from plane s), by shifts."""
-  word = byte_planes[0].astype(jnp.uint32)
-  for s in range(1, 4):
-    word = word | (byte_planes[s].astype(jnp.uint32) << _u32(8 * s))
-  return word
-
-
-def _gather_packed_one(cost, m1flat, i, mshape, mx, colv, my, rowv, state, *, config: KeepoutConfig):
-  """"packed": the gather kernel on four cells per uint32 word (W % 4 == 0), uint8 [H, W].
-
-  colv [W] / rowv [H]: the column / row is in the window and its mask cell on the mask.
-  """
-  h, w = cost.shape
-  hm, wm = mshape
-  base = i * (hm * wm) + my * wm
-  mx4, cv4 = mx.reshape(w // 4, 4), colv.reshape(w // 4, 4)
-  planes = [jnp.where(cv4[None, :, s] & rowv[:, None], m1flat[base[:, None] + mx4[None, :, s]], jnp.uint8(0))
-            for s in range(4)]
-  return _unpack(_packed_rule(_pack(cost), _word(planes), state, config))
-
-
-def _span(cells, valid):
-  """(first, count): the smallest valid entry and how many cells from it to the largest."""
-  lo = jnp.min(jnp.where(valid, cells, jnp.iinfo(jnp.int32).max))
-  hi = jnp.max(jnp.where(valid, cells, -1))
-  some = jnp.any(valid)
-  return jnp.where(some, lo, 0), jnp.where(some, hi - lo + 1, 0)
-
-
-def _rows_one(cost, padded, i, x0, mx, colv, my, rowv, state, *, config: KeepoutConfig):
-  """"rows": a [H, W] slab of the mask rows the robot reads (W columns from x0), then the columns.
-
-  padded: uint8 [M, Hm + 2H, Wm + 2W] (cost + 1) table padded by H rows and W columns of
-  0, so no slice is clipped (dynamic_slice would move a clipped start).
-  """
-  h, w = cost.shape
-  rows = jnp.where(rowv, my, 0) + h
-  slab = jax.vmap(lambda y: jax.lax.dynamic_slice(padded, (i, y, x0 + w), (1, 1, w))[0, 0])(rows)
-  m1 = slab[:, jnp.where(colv, mx - x0, 0)]
-  return _m1_rule_u8(cost, jnp.where(colv[None, :] & rowv[:, None], m1, jnp.uint8(0)), state, config)
-
-
-def _window_one(cost, padded, i, x0, y0, mx, colv, my, rowv, state, *, config: KeepoutConfig):
-  """"window": the robot's [H, W] box of mask cells from (y0, x0), then a gather inside it."""
-  h, w = cost.shape
-  box = jax.lax.dynamic_slice(padded, (i, y0 + h, x0 + w), (1, h, w))[0]
-  m1 = box[jnp.where(rowv, my - y0, 0)[:, None], jnp.where(colv, mx - x0, 0)[None, :]]
-  return _m1_rule_u8(cost, jnp.where(colv[None, :] & rowv[:, None], m1, jnp.uint8(0)), state, config)
-
-
-def _other_res_batch(cells, mask, *, config: KeepoutConfig, impl: str | None = None):
-  """The same-frame cells of a fleet through the exact index vectors, by kernel `impl`.
-
-  Args:
-    cells: (cost uint8 [B, H, W], mask index int32 [B], mx int32 [B, W], vx bool [B, W],
-      my int32 [B, H], vy bool [B, H], col_ok bool [B, W], row_ok bool [B, H], state).
-    mask: the FilterMask stack. config: static KeepoutConfig.
-    impl: one of `_GATHER_IMPLS`; None reads `_GATHER_IMPL`.
-
-  Returns:
-    new cost uint8 [B, H, W], the same integers for every `impl`.
-  """
-  impl = _GATHER_IMPL if impl is None else impl
-  if impl not in _GATHER_IMPLS:
-    raise ValueError(f"gather_impl must be one of {_GATHER_IMPLS}; got {impl!r}")
-  cost, idx, mx, vx, my, vy, col_ok, row_ok, state = cells
-  b, h, w = cost.shape
-  _, hm, wm = mask.data.shape
-  flat = mask.data.reshape(-1)
-
-  def plain():
-    one = lambda c, i, mx, vx, my, vy, co, ro, st: _gather_write_one(c, flat, i, (hm, wm), mx, vx, my, vy, co, ro,
-                                                                     st, config=config)
-    return jax.vmap(one)(*cells)
-
-  if impl == "gather" or (impl == "packed" and w % 4):
-    return plain()
-  colv, rowv = col_ok & vx, row_ok & vy
-  table = _m1_table(mask.data)
-  if impl == "packed":
-    one = functools.partial(_gather_packed_one, mshape=(hm, wm), config=config)
-    return jax.vmap(lambda c, i, mx, cv, my, rv, st: one(c, table.reshape(-1), i, mx=mx, colv=cv, my=my, rowv=rv,
-                                                         state=st))(cost, idx, mx, colv, my, rowv, state)
-  x0, xspan = jax.vmap(_span)(mx, colv)
-  y0, yspan = jax.vmap(_span)(my, rowv)
-  fits = jnp.all((xspan <= w) & (yspan <= h))
-  padded = jnp.pad(table, ((0, 0), (h, h), (w, w)))
-  if impl == "rows":
-    boxed = lambda: jax.vmap(functools.partial(_rows_one, config=config), in_axes=(0, None, 0, 0, 0, 0, 0, 0, 0))(
-        cost, padded, idx, x0, mx, colv, my, rowv, state)
-  else:
-    boxed = lambda: jax.vmap(functools.partial(_window_one, config=config),
-                             in_axes=(0, None, 0, 0, 0, 0, 0, 0, 0, 0))(
-        cost, padded, idx, x0, y0, mx, colv, my, rowv, state)
-  return jax.lax.cond(fits, boxed, plain)
-
-
 # ----------------------------------------------------------------------------- other frame, fast
 #
 # With a transform each master cell's centre is rotated in float32 and mapped with an
@@ -1192,6 +1043,155 @@ def _se2_edges_batch(cost, mask, axes, idx, state, window, run, *, config: Keepo
     return jax.vmap(one)(c, ax, i, st, win, rn)
 
   return _rerun(run & ~trusted[idx], new, exact, (cost, axes, idx, state, window, run), min(b, 8))
+
+
+# ----------------------------------------------------------------------------- same frame, other resolution
+#
+# A fleet whose mask cells are not one slice (another mask resolution) reads them through
+# the two exact index vectors. The kernels below read the same cells in different orders;
+# benchmarks/keepout_probe.py times them side by side on a GPU, and `_GATHER_IMPL` picks
+# the one `keepout_filter` runs (flip it there once the probe has picked a winner):
+#
+#   "gather"  one byte gather per cell through both vectors, uint8 write rule (the default);
+#   "packed"  four cells per uint32 word: four byte gathers from the (cost + 1) table, the
+#             write rule in SWAR word arithmetic, whole-word loads and stores of the costs
+#             (XLA:GPU moves bytes one at a time in an elementwise loop); W % 4 != 0 runs
+#             "gather";
+#   "rows"    two steps: the mask row each costmap row reads, W columns from the first
+#             mask column the robot reads (a [H, W] slab of contiguous row slices), then
+#             the columns inside the slab;
+#   "window"  the box of mask cells the robot reads, one [H, W] dynamic slice, then a
+#             gather inside it.
+#
+# "rows" and "window" need the cells a robot reads to span at most W columns and H rows
+# (a mask as coarse as the costmap or coarser); a fleet with a robot beyond that runs
+# "gather" (one batch-wide branch). Every kernel gives "gather"'s integers
+# (tests/test_keepout_paths.py).
+
+_GATHER_IMPLS = ("gather", "packed", "rows", "window")
+_GATHER_IMPL = "gather"
+
+
+def _m1_table(data):
+  """uint8 [M, Hm, Wm]: each mask cell's cost + 1, 0 where unknown (`mask_cost_plus_one_table`)."""
+  return jnp.asarray(_COST1)[jax.lax.bitcast_convert_type(data, jnp.uint8).astype(jnp.int32)]
+
+
+def _m1_rule_u8(cost, m1, state, config: KeepoutConfig):
+  """Nav2's write rule on (mask cost + 1) bytes m1 (0: unknown or not visited), uint8 [H, W]."""
+  c1 = cost + jnp.uint8(1)
+  if config.override_lethal_cost:
+    value = jnp.where(state.is_pose_lethal, jnp.uint8(config.lethal_override_cost), m1 - jnp.uint8(1))
+    return jnp.where(m1 > c1, value, cost)
+  return jnp.maximum(c1, m1) - jnp.uint8(1)
+
+
+def _packed_rule(c, m1, state, config: KeepoutConfig):
+  """`_m1_rule_u8` on uint32 words of four cells (SWAR, see `_aligned_packed_one`)."""
+  write = _bytes_less_than(_bytes_plus_one(c), m1)
+  if config.override_lethal_cost:
+    value = jnp.where(state.is_pose_lethal, _u32(config.lethal_override_cost * _ONES), _bytes_minus_one(m1))
+  else:
+    value = _bytes_minus_one(m1)
+  return (c & ~write) | (value & write)
+
+
+def _word(byte_planes):
+  """uint32 word from four uint8 arrays (byte s of the word from plane s), by shifts."""
+  word = byte_planes[0].astype(jnp.uint32)
+  for s in range(1, 4):
+    word = word | (byte_planes[s].astype(jnp.uint32) << _u32(8 * s))
+  return word
+
+
+def _gather_packed_one(cost, m1flat, i, mshape, mx, colv, my, rowv, state, *, config: KeepoutConfig):
+  """"packed": the gather kernel on four cells per uint32 word (W % 4 == 0), uint8 [H, W].
+
+  colv [W] / rowv [H]: the column / row is in the window and its mask cell on the mask.
+  """
+  h, w = cost.shape
+  hm, wm = mshape
+  base = i * (hm * wm) + my * wm
+  mx4, cv4 = mx.reshape(w // 4, 4), colv.reshape(w // 4, 4)
+  planes = [jnp.where(cv4[None, :, s] & rowv[:, None], m1flat[base[:, None] + mx4[None, :, s]], jnp.uint8(0))
+            for s in range(4)]
+  return _unpack(_packed_rule(_pack(cost), _word(planes), state, config))
+
+
+def _span(cells, valid):
+  """(first, count): the smallest valid entry and how many cells from it to the largest."""
+  lo = jnp.min(jnp.where(valid, cells, jnp.iinfo(jnp.int32).max))
+  hi = jnp.max(jnp.where(valid, cells, -1))
+  some = jnp.any(valid)
+  return jnp.where(some, lo, 0), jnp.where(some, hi - lo + 1, 0)
+
+
+def _rows_one(cost, padded, i, x0, mx, colv, my, rowv, state, *, config: KeepoutConfig):
+  """"rows": a [H, W] slab of the mask rows the robot reads (W columns from x0), then the columns.
+
+  padded: uint8 [M, Hm + 2H, Wm + 2W] (cost + 1) table padded by H rows and W columns of
+  0, so no slice is clipped (dynamic_slice would move a clipped start).
+  """
+  h, w = cost.shape
+  rows = jnp.where(rowv, my, 0) + h
+  slab = jax.vmap(lambda y: jax.lax.dynamic_slice(padded, (i, y, x0 + w), (1, 1, w))[0, 0])(rows)
+  m1 = slab[:, jnp.where(colv, mx - x0, 0)]
+  return _m1_rule_u8(cost, jnp.where(colv[None, :] & rowv[:, None], m1, jnp.uint8(0)), state, config)
+
+
+def _window_one(cost, padded, i, x0, y0, mx, colv, my, rowv, state, *, config: KeepoutConfig):
+  """"window": the robot's [H, W] box of mask cells from (y0, x0), then a gather inside it."""
+  h, w = cost.shape
+  box = jax.lax.dynamic_slice(padded, (i, y0 + h, x0 + w), (1, h, w))[0]
+  m1 = box[jnp.where(rowv, my - y0, 0)[:, None], jnp.where(colv, mx - x0, 0)[None, :]]
+  return _m1_rule_u8(cost, jnp.where(colv[None, :] & rowv[:, None], m1, jnp.uint8(0)), state, config)
+
+
+def _other_res_batch(cells, mask, *, config: KeepoutConfig, impl: str | None = None):
+  """The same-frame cells of a fleet through the exact index vectors, by kernel `impl`.
+
+  Args:
+    cells: (cost uint8 [B, H, W], mask index int32 [B], mx int32 [B, W], vx bool [B, W],
+      my int32 [B, H], vy bool [B, H], col_ok bool [B, W], row_ok bool [B, H], state).
+    mask: the FilterMask stack. config: static KeepoutConfig.
+    impl: one of `_GATHER_IMPLS`; None reads `_GATHER_IMPL`.
+
+  Returns:
+    new cost uint8 [B, H, W], the same integers for every `impl`.
+  """
+  impl = _GATHER_IMPL if impl is None else impl
+  if impl not in _GATHER_IMPLS:
+    raise ValueError(f"gather_impl must be one of {_GATHER_IMPLS}; got {impl!r}")
+  cost, idx, mx, vx, my, vy, col_ok, row_ok, state = cells
+  b, h, w = cost.shape
+  _, hm, wm = mask.data.shape
+  flat = mask.data.reshape(-1)
+
+  def plain():
+    one = lambda c, i, mx, vx, my, vy, co, ro, st: _gather_write_one(c, flat, i, (hm, wm), mx, vx, my, vy, co, ro,
+                                                                     st, config=config)
+    return jax.vmap(one)(*cells)
+
+  if impl == "gather" or (impl == "packed" and w % 4):
+    return plain()
+  colv, rowv = col_ok & vx, row_ok & vy
+  table = _m1_table(mask.data)
+  if impl == "packed":
+    one = functools.partial(_gather_packed_one, mshape=(hm, wm), config=config)
+    return jax.vmap(lambda c, i, mx, cv, my, rv, st: one(c, table.reshape(-1), i, mx=mx, colv=cv, my=my, rowv=rv,
+                                                         state=st))(cost, idx, mx, colv, my, rowv, state)
+  x0, xspan = jax.vmap(_span)(mx, colv)
+  y0, yspan = jax.vmap(_span)(my, rowv)
+  fits = jnp.all((xspan <= w) & (yspan <= h))
+  padded = jnp.pad(table, ((0, 0), (h, h), (w, w)))
+  if impl == "rows":
+    boxed = lambda: jax.vmap(functools.partial(_rows_one, config=config), in_axes=(0, None, 0, 0, 0, 0, 0, 0, 0))(
+        cost, padded, idx, x0, mx, colv, my, rowv, state)
+  else:
+    boxed = lambda: jax.vmap(functools.partial(_window_one, config=config),
+                             in_axes=(0, None, 0, 0, 0, 0, 0, 0, 0, 0))(
+        cost, padded, idx, x0, y0, mx, colv, my, rowv, state)
+  return jax.lax.cond(fits, boxed, plain)
 
 
 def _general_batch(costmap, mask, idx, idx_ok, state, window, enabled, transform, *, config: KeepoutConfig):
