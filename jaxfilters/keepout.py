@@ -953,8 +953,10 @@ def _se2_batch(costmap, mask, idx, idx_ok, state, window, enabled, transform, *,
 _SE2_IMPLS = ("codes", "fused", "thresholds", "thresholds_packed")
 # The kernel `keepout_filter` runs with a transform (see `_se2_batch`), off the CPU and on
 # it. benchmarks/keepout_probe.py times them all on a GPU; flip `_SE2_IMPL` to its winner.
-# On XLA:CPU (2-core VM, B = 256, 200x200, 2000x2000 mask) "codes" ran 37 ms, "thresholds"
-# 60 ms: XLA:CPU does not vectorise a loop that reads a table, so the CPU keeps "codes".
+# On XLA:CPU (2-core VM, B = 256, 200x200, 2000x2000 mask, CPU time, min of 7) "codes" ran
+# 38-39 ms, "thresholds" 42-44 ms (it compiles in 3 s instead of 4-6 s): XLA:CPU does not
+# vectorise a loop that reads a table, so the CPU keeps "codes" unless the lead decides
+# the compile time is worth more.
 _SE2_IMPL = "codes"
 _SE2_IMPL_CPU = "codes"
 
@@ -985,7 +987,7 @@ def _se2_edges_one(cost, axes, tables, source, i, mshape, window, run, state, *,
   Args:
     cost: uint8 [H, W]. axes: `_se2_axes_one`. tables: (tx, ty, mask origin float32
       [M, 2] (leading parts), inv [M]) from `_se2_edge_tables`.
-    source: the masks, flat: int8 data (bytes) or, `packed`, the (cost + 1) table.
+    source: the masks' (cost + 1) bytes (`_m1_table`), flat.
     i: int32 [] the mask. mshape: (Hm, Wm). window int32 [4], run bool [], state, config.
     packed: four cells per uint32 word (W % 4 == 0).
   """
@@ -1005,7 +1007,7 @@ def _se2_edges_one(cost, axes, tables, source, i, mshape, window, run, state, *,
 
   if not packed:
     index, visit = cells(xc, xs, col_ok)
-    return _write_u8(cost, source[index], visit, state, config)
+    return _m1_rule_u8(cost, jnp.where(visit, source[index], jnp.uint8(0)), state, config)
   planes = []
   for s in range(4):
     index, visit = cells(xc[s::4], xs[s::4], col_ok[s::4])
@@ -1019,7 +1021,7 @@ def _se2_edges_batch(cost, mask, axes, idx, state, window, run, *, config: Keepo
   _, hm, wm = mask.data.shape
   tx, ty, inv, trusted = _se2_edge_tables(mask)
   tables = (tx, ty, mask.origin, inv)
-  source = _m1_table(mask.data).reshape(-1) if packed else mask.data.reshape(-1)
+  source = _m1_table(mask.data).reshape(-1)
 
   def group(a):
     c, ax, i, win, rn, st = a
