@@ -1,7 +1,7 @@
 """Where the other-resolution and other-frame (SE2) keepout paths spend their time, on one device.
 
-    python -m benchmarks.keepout_probe --out $OUT/keepout_probe.json
-        [--robots 16384] [--hw 200] [--mask 2000] [--repeats 7] [--budget-s 180]
+    PYTHONPATH=$PWD python3 -m benchmarks.keepout_probe --out $OUT/keepout_probe.json
+        [--robots 16384] [--hw 200] [--mask 2000] [--repeats 7] [--budget-s 170]
         [--only other_res,se2] [--no-edges] [--list]
 
 Prints one compact JSON object on stdout (a few KB, so it survives a log tail) and, with
@@ -127,7 +127,8 @@ def edge_fleets(kind):
     en = jnp.asarray(rng.random(b) < 0.9)
     # One pytree structure for every fleet (zero lower parts where the value is float32): one compile.
     zeros = lambda x, shape: jnp.zeros(shape, jnp.float32) if x is None else x
-    cm = dataclasses.replace(cm, origin_lo=zeros(cm.origin_lo, (b, 2, 2)), resolution_lo=zeros(cm.resolution_lo, (b, 2)))
+    cm = dataclasses.replace(cm, origin_lo=zeros(cm.origin_lo, (b, 2, 2)),
+                             resolution_lo=zeros(cm.resolution_lo, (b, 2)))
     mask = dataclasses.replace(mask, origin_lo=zeros(mask.origin_lo, (2, 2, 2)))
     idx, ok, _, en, win, tf = ko._batched_inputs(cm, mask, jnp.zeros((b, 3)), mi, en, win,
                                                  None if tf is None else jnp.asarray(tf), "probe")
@@ -539,7 +540,7 @@ def main(argv=None) -> int:
   ap.add_argument("--hw", type=int, default=200, help="costmap H = W (default 200)")
   ap.add_argument("--mask", type=int, default=None, help="mask Hm = Wm (default 2000; 500 on the CPU)")
   ap.add_argument("--repeats", type=int, default=7, help="timed runs per variant (>= 3)")
-  ap.add_argument("--budget-s", type=float, default=180.0, help="start no variant after this many seconds")
+  ap.add_argument("--budget-s", type=float, default=170.0, help="start no variant after this many seconds")
   ap.add_argument("--only", default="", help="comma-separated figures: other_res,se2")
   ap.add_argument("--no-edges", action="store_true", help="skip the edge-fleet exactness checks")
   ap.add_argument("--list", action="store_true", help="print the variants and exit")

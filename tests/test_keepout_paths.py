@@ -443,7 +443,8 @@ def _impl_inputs(case, transform, *, lower_parts=False):
   cm, mask, state, window, mask_index, enabled = case
   if lower_parts:
     zeros = lambda x, shape: jnp.zeros(shape, jnp.float32) if x is None else x
-    cm = dataclasses.replace(cm, origin_lo=zeros(cm.origin_lo, (B, 2, 2)), resolution_lo=zeros(cm.resolution_lo, (B, 2)))
+    cm = dataclasses.replace(cm, origin_lo=zeros(cm.origin_lo, (B, 2, 2)),
+                             resolution_lo=zeros(cm.resolution_lo, (B, 2)))
     mask = dataclasses.replace(mask, origin_lo=zeros(mask.origin_lo, (M, 2, 2)))
   idx, ok, _, en, win, tf = ko._batched_inputs(cm, mask, jnp.zeros((B, 3)), mask_index, enabled, window, transform,
                                                "test")
