@@ -661,7 +661,7 @@ def _tree_where(pick, a, b):
 
 
 def _same_frame_batch(costmap, mask, idx, idx_ok, state, window, enabled, *, config: KeepoutConfig,
-                      loop: str, packed: bool | None = None):
+                      loop: str, packed: bool | None = None, gather_impl: str | None = None):
   """The fast same-frame keepout over a fleet: same integers as the exact path.
 
   The per-robot vector work (window clip, bracketed index vectors, the exact vectors
@@ -670,7 +670,8 @@ def _same_frame_batch(costmap, mask, idx, idx_ok, state, window, enabled, *, con
   slice-or-gather choice a real branch, each slice contiguous: the CPU choice), "vmap"
   vectorises them too (the GPU choice) and makes the choice once for the batch.
   `packed` (vmap) runs the slice on four cells per uint32 word (needs W % 4 == 0);
-  None picks it off the CPU backend.
+  None picks it off the CPU backend. `gather_impl` (vmap) picks the kernel of a fleet
+  that is not sliced throughout (`_other_res_batch`); None reads `_GATHER_IMPL`.
   """
   b, h, w = costmap.cost.shape
   m, hm, wm = mask.data.shape
@@ -742,7 +743,8 @@ def _same_frame_batch(costmap, mask, idx, idx_ok, state, window, enabled, *, con
       one = lambda c, i, x, y, co, ro, st: _aligned_one(c, table, i, x, y, co, ro, st, config=config)
     return jax.vmap(one)(costmap.cost, idx, sx, sy, col_ok, row_ok, state)
 
-  return jax.lax.cond(jnp.all(sliced), by_slice, lambda: jax.vmap(gather)(*cells)), new_state
+  other = lambda: _other_res_batch(cells, mask, config=config, impl=gather_impl)
+  return jax.lax.cond(jnp.all(sliced), by_slice, other), new_state
 
 
 def _cost_plus_one_table(data, h, w):
@@ -885,15 +887,31 @@ def _se2_fix_one(new_cost, code, cost, axes, stack, i, mask_origin, mask_res, st
 
 
 def _se2_batch(costmap, mask, idx, idx_ok, state, window, enabled, transform, *, config: KeepoutConfig,
-               loop: str):
+               loop: str, impl: str | None = None):
   """The fast other-frame keepout over a fleet: same integers as the exact path.
 
-  Two passes: the cells' codes (`_se2_codes_one`, written out so that XLA does not
-  fuse the arithmetic into the gather, which runs it several times slower), then the
-  gather and the write rule. Robots with undecided cells are then settled by
-  `_se2_fix_one` (`_rerun`): one after another in a loop of as many turns as there
-  are such robots ("map"), or gathered and settled together ("vmap").
+  `impl` (one of `_SE2_IMPLS`; None reads `_SE2_IMPL_CPU` on the CPU backend and
+  `_SE2_IMPL` on the others) picks the kernel:
+
+  * "codes": two passes, the cells' codes (`_se2_codes_one`, written out so that XLA
+    does not fuse the arithmetic into the gather, which runs it several times slower on
+    XLA:CPU), then the gather and the write rule. Robots with undecided cells are then
+    settled by `_se2_fix_one` (`_rerun`): one after another in a loop of as many turns
+    as there are such robots ("map"), or gathered and settled together ("vmap").
+  * "fused": the same codes computed inside the gather's pass (no [B, H, W] int32
+    array), and once more in a reduction that finds the robots to settle.
+  * "thresholds", "thresholds_packed": every cell decided exactly in one pass by the
+    masks' edge tables (`_se2_edges_one`): no undecided cells, no second pass; robots
+    whose mask geometry the tables do not cover (`geometry.edge_thresholds`' `trusted`,
+    never for a map file's values) run the exact per-cell path. "_packed" works on
+    four cells per uint32 word (W % 4 != 0 runs "thresholds").
   """
+  if impl is None:
+    impl = _SE2_IMPL_CPU if jax.default_backend() == "cpu" else _SE2_IMPL
+  if impl not in _SE2_IMPLS:
+    raise ValueError(f"impl must be one of {_SE2_IMPLS}; got {impl!r}")
+  if loop not in ("map", "vmap"):
+    raise ValueError(f"loop must be 'auto', 'map' or 'vmap'; got {loop!r}")
   b, h, w = costmap.cost.shape
   m, hm, wm = mask.data.shape
   flat = mask.data.reshape(-1)
@@ -906,6 +924,10 @@ def _se2_batch(costmap, mask, idx, idx_ok, state, window, enabled, transform, *,
   axes = jax.vmap(axes_of, in_axes=(*geo_axes, 0))(*_robot_geometry(costmap, mask), transform)
   run = enabled & idx_ok
   new_state = _with_error(jax.vmap(_processed)(state, run), ~idx_ok)
+  if impl.startswith("thresholds"):
+    packed = impl == "thresholds_packed" and w % 4 == 0
+    return _se2_edges_batch(costmap.cost, mask, axes, idx, state, window, run, config=config, loop=loop,
+                            packed=packed), new_state
 
   def codes_one(a):
     ax, i, win, rn = a
@@ -918,6 +940,11 @@ def _se2_batch(costmap, mask, idx, idx_ok, state, window, enabled, transform, *,
     return _se2_fix_one(new, code, old, ax, mask.data, i, _mask_origin(mask, i), mask.resolution[i], st, win, rn,
                         config=config, mode=mode)
 
+  def fused(pr, c, st):
+    """(new cost, undecided cells per robot) of a group of robots, codes never written out."""
+    new = jax.vmap(lambda a, c, st: _se2_write_one(c, codes_one(a), flat, st, config=config))(pr, c, st)
+    return new, jax.vmap(lambda a: jnp.sum((codes_one(a) == -2).astype(jnp.int32)))(pr)
+
   per_robot = (axes, idx, window, run)
   if loop == "map":
     # Chunks of robots, each: codes robot by robot (an inner loop, so XLA writes them out),
@@ -929,6 +956,9 @@ def _se2_batch(costmap, mask, idx, idx_ok, state, window, enabled, transform, *,
 
     def chunk(a):
       pr, c, st = a
+      if impl == "fused":
+        new, undecided = fused(pr, c, st)
+        return new, undecided > 0
       k = jax.lax.map(codes_one, pr)
       return write(c, k, st), jnp.any(k == -2, axis=(1, 2))
 
@@ -939,21 +969,280 @@ def _se2_batch(costmap, mask, idx, idx_ok, state, window, enabled, transform, *,
       return fix(new, codes_one((ax, i, win, rn)), old, ax, i, st, win, rn)
     args = (cost, costmap.cost, axes, idx, state, window, run)
     return _rerun(need, cost, lambda a: jax.vmap(settle)(*a), args, 1), new_state
-  if loop != "vmap":
-    raise ValueError(f"loop must be 'auto', 'map' or 'vmap'; got {loop!r}")
-  chunk_cells = _PASS_CHUNK_CELLS_CPU if jax.default_backend() == "cpu" else _PASS_CHUNK_CELLS
-  codes = jax.lax.map(codes_one, per_robot, batch_size=_divisor_at_most(b, chunk_cells // (h * w)))
-  cost = write(costmap.cost, codes, state)
-  undecided = jnp.sum((codes == -2).astype(jnp.int32), axis=(1, 2))
+  if impl == "fused":
+    cost, undecided = fused(per_robot, costmap.cost, state)
+    # The fixes recompute a robot's codes (it has none written out).
+    fix_codes = lambda new, old, ax, i, st, win, rn, mode: fix(new, codes_one((ax, i, win, rn)), old, ax, i, st, win,
+                                                                rn, mode=mode)
+    args = (cost, costmap.cost, axes, idx, state, window, run)
+  else:
+    chunk_cells = _PASS_CHUNK_CELLS_CPU if jax.default_backend() == "cpu" else _PASS_CHUNK_CELLS
+    codes = jax.lax.map(codes_one, per_robot, batch_size=_divisor_at_most(b, chunk_cells // (h * w)))
+    cost = write(costmap.cost, codes, state)
+    undecided = jnp.sum((codes == -2).astype(jnp.int32), axis=(1, 2))
+    fix_codes = lambda new, code, old, ax, i, st, win, rn, mode: fix(new, code, old, ax, i, st, win, rn, mode=mode)
+    args = (cost, codes, costmap.cost, axes, idx, state, window, run)
   many = undecided > _FIX_CELLS
-  args = (cost, codes, costmap.cost, axes, idx, state, window, run)
   # Under vmap a branch runs both sides, so the few-cells and whole-window fixes are
   # separate passes, each over the robots that need it.
-  few = functools.partial(fix, mode="few")
+  few = functools.partial(fix_codes, mode="few")
   cost = _rerun((undecided > 0) & ~many, cost, lambda a: jax.vmap(few)(*a), args, _rerun_capacity(b))
   args = (cost,) + args[1:]
-  whole = functools.partial(fix, mode="whole")
+  whole = functools.partial(fix_codes, mode="whole")
   return _rerun(many, cost, lambda a: jax.vmap(whole)(*a), args, min(b, 8)), new_state
+
+
+# ----------------------------------------------------------------------------- other frame, edge tables
+#
+# `geometry.floor_by_edges` decides each cell's floor exactly from a per-mask table of edge
+# thresholds (the smallest float32 at or above each mask-cell edge): an estimate good to one
+# cell, two table reads and two float32 comparisons per axis, no rounding that could matter.
+# So the other-frame path needs no undecided-cell flag, no reduction and no second pass.
+
+_SE2_IMPLS = ("codes", "fused", "thresholds", "thresholds_packed")
+# The kernel `keepout_filter` runs with a transform (see `_se2_batch`), off the CPU and on
+# it. benchmarks/keepout_probe.py times them all on a GPU; flip `_SE2_IMPL` to its winner.
+# On XLA:CPU (2-core VM, B = 256, 200x200, 2000x2000 mask, CPU time, min of 7) "codes" ran
+# 38-39 ms, "thresholds" 42-44 ms (it compiles in 3 s instead of 4-6 s): XLA:CPU does not
+# vectorise a loop that reads a table, so the CPU keeps "codes" unless the lead decides
+# the compile time is worth more.
+_SE2_IMPL = "codes"
+_SE2_IMPL_CPU = "codes"
+
+
+def _se2_edge_tables(mask: FilterMask):
+  """Each mask's edge tables: (tx float32 [M * (Wm + 3)], ty float32 [M * (Hm + 3)], inv float32 [M],
+  trusted bool [M]) (`geometry.edge_thresholds`, `geometry.edge_reciprocal`)."""
+  _, hm, wm = mask.data.shape
+  lo = mask.origin_lo
+
+  def axis(a, size):
+    parts = [mask.origin[:, a]] + ([] if lo is None else [lo[:, a, 0], lo[:, a, 1]])
+    return geometry.edge_thresholds(parts, mask.resolution, size)
+
+  tx, okx = axis(0, wm)
+  ty, oky = axis(1, hm)
+  inv, okr = geometry.edge_reciprocal(mask.resolution)
+  return tx.reshape(-1), ty.reshape(-1), inv, okx & oky & okr
+
+
+def _se2_edges_one(cost, axes, tables, source, i, mshape, window, run, state, *, config: KeepoutConfig,
+                   packed: bool):
+  """One robot's other-frame cells decided by the edge tables: new cost uint8 [H, W].
+
+  The points are `_se2_grid`'s (the same float32 sums), so the integers are the exact
+  path's wherever the robot's mask tables are trusted.
+
+  Args:
+    cost: uint8 [H, W]. axes: `_se2_axes_one`. tables: (tx, ty, mask origin float32
+      [M, 2] (leading parts), inv [M]) from `_se2_edge_tables`.
+    source: the masks' (cost + 1) bytes (`_m1_table`), flat.
+    i: int32 [] the mask. mshape: (Hm, Wm). window int32 [4], run bool [], state, config.
+    packed: four cells per uint32 word (W % 4 == 0).
+  """
+  tx, ty, mo, inv = tables
+  xc, xs, yc, ys, t = axes
+  h, w = cost.shape
+  hm, wm = mshape
+  col_ok, row_ok = _window_flags(w, h, window[0], window[1], window[2], window[3], run)
+
+  def cells(xc, xs, col_ok):
+    px = (xc[None, :] - ys[:, None]) + t[0]            # `_se2_grid`'s sums
+    py = (xs[None, :] + yc[:, None]) + t[1]
+    nx = geometry.floor_by_edges(px, mo[i, 0], inv[i], tx, i * (wm + 3), wm)
+    ny = geometry.floor_by_edges(py, mo[i, 1], inv[i], ty, i * (hm + 3), hm)
+    visit = (nx >= 0) & (nx < wm) & (ny >= 0) & (ny < hm) & col_ok[None, :] & row_ok[:, None]
+    return jnp.where(visit, i * (hm * wm) + ny * wm + nx, 0), visit
+
+  if not packed:
+    index, visit = cells(xc, xs, col_ok)
+    return _m1_rule_u8(cost, jnp.where(visit, source[index], jnp.uint8(0)), state, config)
+  planes = []
+  for s in range(4):
+    index, visit = cells(xc[s::4], xs[s::4], col_ok[s::4])
+    planes.append(jnp.where(visit, source[index], jnp.uint8(0)))
+  return _unpack(_packed_rule(_pack(cost), _word(planes), state, config))
+
+
+def _se2_edges_batch(cost, mask, axes, idx, state, window, run, *, config: KeepoutConfig, loop: str, packed: bool):
+  """The edge-table kernel over a fleet, then the exact path for robots of untrusted masks."""
+  b, h, w = cost.shape
+  _, hm, wm = mask.data.shape
+  tx, ty, inv, trusted = _se2_edge_tables(mask)
+  tables = (tx, ty, mask.origin, inv)
+  source = _m1_table(mask.data).reshape(-1)
+
+  def group(a):
+    c, ax, i, win, rn, st = a
+    one = lambda c, ax, i, win, rn, st: _se2_edges_one(c, ax, tables, source, i, (hm, wm), win, rn, st,
+                                                       config=config, packed=packed)
+    return jax.vmap(one)(c, ax, i, win, rn, st)
+
+  per_robot = (cost, axes, idx, window, run, state)
+  if loop == "map":   # chunks of a few MB (see `_se2_batch`)
+    cb = _divisor_at_most(b, max(2, (1 << 21) // (h * w)))
+    new = jax.lax.map(group, jax.tree.map(lambda x: x.reshape(b // cb, cb, *x.shape[1:]), per_robot))
+    new = new.reshape(b, h, w)
+  else:
+    new = group(per_robot)
+
+  def exact(a):
+    c, ax, i, st, win, rn = a
+    one = lambda c, ax, i, st, win, rn: _keepout_stack_one(
+        c, None, None, mask.data, i, _mask_origin(mask, i), mask.resolution[i], st, win, rn, None, config=config,
+        axes=ax)[0]
+    return jax.vmap(one)(c, ax, i, st, win, rn)
+
+  return _rerun(run & ~trusted[idx], new, exact, (cost, axes, idx, state, window, run), min(b, 8))
+
+
+# ----------------------------------------------------------------------------- same frame, other resolution
+#
+# A fleet whose mask cells are not one slice (another mask resolution) reads them through
+# the two exact index vectors. The kernels below read the same cells in different orders;
+# benchmarks/keepout_probe.py times them side by side on a GPU, and `_GATHER_IMPL` picks
+# the one `keepout_filter` runs (flip it there once the probe has picked a winner):
+#
+#   "gather"  one byte gather per cell through both vectors, uint8 write rule (the default);
+#   "packed"  four cells per uint32 word: four byte gathers from the (cost + 1) table, the
+#             write rule in SWAR word arithmetic, whole-word loads and stores of the costs
+#             (XLA:GPU moves bytes one at a time in an elementwise loop); W % 4 != 0 runs
+#             "gather";
+#   "rows"    two steps: the mask row each costmap row reads, W columns from the first
+#             mask column the robot reads (a [H, W] slab of contiguous row slices), then
+#             the columns inside the slab;
+#   "window"  the box of mask cells the robot reads, one [H, W] dynamic slice, then a
+#             gather inside it.
+#
+# "rows" and "window" need the cells a robot reads to span at most W columns and H rows
+# (a mask as coarse as the costmap or coarser); a fleet with a robot beyond that runs
+# "gather" (one batch-wide branch). Every kernel gives "gather"'s integers
+# (tests/test_keepout_paths.py).
+
+_GATHER_IMPLS = ("gather", "packed", "rows", "window")
+_GATHER_IMPL = "gather"
+
+
+def _m1_table(data):
+  """uint8 [M, Hm, Wm]: each mask cell's cost + 1, 0 where unknown (`mask_cost_plus_one_table`)."""
+  return jnp.asarray(_COST1)[jax.lax.bitcast_convert_type(data, jnp.uint8).astype(jnp.int32)]
+
+
+def _m1_rule_u8(cost, m1, state, config: KeepoutConfig):
+  """Nav2's write rule on (mask cost + 1) bytes m1 (0: unknown or not visited), uint8 [H, W]."""
+  c1 = cost + jnp.uint8(1)
+  if config.override_lethal_cost:
+    value = jnp.where(state.is_pose_lethal, jnp.uint8(config.lethal_override_cost), m1 - jnp.uint8(1))
+    return jnp.where(m1 > c1, value, cost)
+  return jnp.maximum(c1, m1) - jnp.uint8(1)
+
+
+def _packed_rule(c, m1, state, config: KeepoutConfig):
+  """`_m1_rule_u8` on uint32 words of four cells (SWAR, see `_aligned_packed_one`)."""
+  write = _bytes_less_than(_bytes_plus_one(c), m1)
+  if config.override_lethal_cost:
+    value = jnp.where(state.is_pose_lethal, _u32(config.lethal_override_cost * _ONES), _bytes_minus_one(m1))
+  else:
+    value = _bytes_minus_one(m1)
+  return (c & ~write) | (value & write)
+
+
+def _word(byte_planes):
+  """uint32 word from four uint8 arrays (byte s of the word from plane s), by shifts."""
+  word = byte_planes[0].astype(jnp.uint32)
+  for s in range(1, 4):
+    word = word | (byte_planes[s].astype(jnp.uint32) << _u32(8 * s))
+  return word
+
+
+def _gather_packed_one(cost, m1flat, i, mshape, mx, colv, my, rowv, state, *, config: KeepoutConfig):
+  """"packed": the gather kernel on four cells per uint32 word (W % 4 == 0), uint8 [H, W].
+
+  colv [W] / rowv [H]: the column / row is in the window and its mask cell on the mask.
+  """
+  h, w = cost.shape
+  hm, wm = mshape
+  base = i * (hm * wm) + my * wm
+  mx4, cv4 = mx.reshape(w // 4, 4), colv.reshape(w // 4, 4)
+  planes = [jnp.where(cv4[None, :, s] & rowv[:, None], m1flat[base[:, None] + mx4[None, :, s]], jnp.uint8(0))
+            for s in range(4)]
+  return _unpack(_packed_rule(_pack(cost), _word(planes), state, config))
+
+
+def _span(cells, valid):
+  """(first, count): the smallest valid entry and how many cells from it to the largest."""
+  lo = jnp.min(jnp.where(valid, cells, jnp.iinfo(jnp.int32).max))
+  hi = jnp.max(jnp.where(valid, cells, -1))
+  some = jnp.any(valid)
+  return jnp.where(some, lo, 0), jnp.where(some, hi - lo + 1, 0)
+
+
+def _rows_one(cost, padded, i, x0, mx, colv, my, rowv, state, *, config: KeepoutConfig):
+  """"rows": a [H, W] slab of the mask rows the robot reads (W columns from x0), then the columns.
+
+  padded: uint8 [M, Hm + 2H, Wm + 2W] (cost + 1) table padded by H rows and W columns of
+  0, so no slice is clipped (dynamic_slice would move a clipped start).
+  """
+  h, w = cost.shape
+  rows = jnp.where(rowv, my, 0) + h
+  slab = jax.vmap(lambda y: jax.lax.dynamic_slice(padded, (i, y, x0 + w), (1, 1, w))[0, 0])(rows)
+  m1 = slab[:, jnp.where(colv, mx - x0, 0)]
+  return _m1_rule_u8(cost, jnp.where(colv[None, :] & rowv[:, None], m1, jnp.uint8(0)), state, config)
+
+
+def _window_one(cost, padded, i, x0, y0, mx, colv, my, rowv, state, *, config: KeepoutConfig):
+  """"window": the robot's [H, W] box of mask cells from (y0, x0), then a gather inside it."""
+  h, w = cost.shape
+  box = jax.lax.dynamic_slice(padded, (i, y0 + h, x0 + w), (1, h, w))[0]
+  m1 = box[jnp.where(rowv, my - y0, 0)[:, None], jnp.where(colv, mx - x0, 0)[None, :]]
+  return _m1_rule_u8(cost, jnp.where(colv[None, :] & rowv[:, None], m1, jnp.uint8(0)), state, config)
+
+
+def _other_res_batch(cells, mask, *, config: KeepoutConfig, impl: str | None = None):
+  """The same-frame cells of a fleet through the exact index vectors, by kernel `impl`.
+
+  Args:
+    cells: (cost uint8 [B, H, W], mask index int32 [B], mx int32 [B, W], vx bool [B, W],
+      my int32 [B, H], vy bool [B, H], col_ok bool [B, W], row_ok bool [B, H], state).
+    mask: the FilterMask stack. config: static KeepoutConfig.
+    impl: one of `_GATHER_IMPLS`; None reads `_GATHER_IMPL`.
+
+  Returns:
+    new cost uint8 [B, H, W], the same integers for every `impl`.
+  """
+  impl = _GATHER_IMPL if impl is None else impl
+  if impl not in _GATHER_IMPLS:
+    raise ValueError(f"gather_impl must be one of {_GATHER_IMPLS}; got {impl!r}")
+  cost, idx, mx, vx, my, vy, col_ok, row_ok, state = cells
+  b, h, w = cost.shape
+  _, hm, wm = mask.data.shape
+  flat = mask.data.reshape(-1)
+
+  def plain():
+    one = lambda c, i, mx, vx, my, vy, co, ro, st: _gather_write_one(c, flat, i, (hm, wm), mx, vx, my, vy, co, ro,
+                                                                     st, config=config)
+    return jax.vmap(one)(*cells)
+
+  if impl == "gather" or (impl == "packed" and w % 4):
+    return plain()
+  colv, rowv = col_ok & vx, row_ok & vy
+  table = _m1_table(mask.data)
+  if impl == "packed":
+    one = functools.partial(_gather_packed_one, mshape=(hm, wm), config=config)
+    return jax.vmap(lambda c, i, mx, cv, my, rv, st: one(c, table.reshape(-1), i, mx=mx, colv=cv, my=my, rowv=rv,
+                                                         state=st))(cost, idx, mx, colv, my, rowv, state)
+  x0, xspan = jax.vmap(_span)(mx, colv)
+  y0, yspan = jax.vmap(_span)(my, rowv)
+  fits = jnp.all((xspan <= w) & (yspan <= h))
+  padded = jnp.pad(table, ((0, 0), (h, h), (w, w)))
+  if impl == "rows":
+    boxed = lambda: jax.vmap(functools.partial(_rows_one, config=config), in_axes=(0, None, 0, 0, 0, 0, 0, 0, 0))(
+        cost, padded, idx, x0, mx, colv, my, rowv, state)
+  else:
+    boxed = lambda: jax.vmap(functools.partial(_window_one, config=config),
+                             in_axes=(0, None, 0, 0, 0, 0, 0, 0, 0, 0))(
+        cost, padded, idx, x0, y0, mx, colv, my, rowv, state)
+  return jax.lax.cond(fits, boxed, plain)
 
 
 def _general_batch(costmap, mask, idx, idx_ok, state, window, enabled, transform, *, config: KeepoutConfig):

@@ -356,3 +356,176 @@ def test_other_frame_semantics_against_numpy_and_float64_reference():
         fy = (sn * x + cs * y + float(tf[b, 1]) - morigin[1]) / float(mask.resolution[i])
         near[j, k] = min(abs(fx - round(fx)), abs(fy - round(fy))) * float(mask.resolution[i]) < 1e-4
     np.testing.assert_array_equal(got[b][~near], ref[~near])
+
+
+# ----------------------------------------------------------------------------- edge tables (issue 9 item 2)
+#
+# `geometry.edge_thresholds` / `floor_by_edges` decide each other-frame cell with float32
+# comparisons against exact per-mask thresholds; the kernels selected by `_se2_batch(impl=)`
+# and `_same_frame_batch(gather_impl=)` must give the exact path's integers.
+
+EDGE_SIZE = 64
+_edges = jax.jit(lambda parts, r: geometry.edge_thresholds([parts[0], parts[1], parts[2]], r, EDGE_SIZE))
+_floor_edges = jax.jit(lambda x, o, inv, table: geometry.floor_by_edges(x, o, inv, table, jnp.int32(0), EDGE_SIZE))
+
+
+def _edge(parts, r, n):
+  return sum(Fraction(float(p)) for p in parts) + n * Fraction(float(r))
+
+
+def _ceil32(e):
+  """The smallest float32 >= the Fraction e (by bisection on float32 neighbours)."""
+  t = np.float32(float(e))
+  while Fraction(float(t)) < e:
+    t = np.nextafter(t, np.float32(np.inf))
+  while Fraction(float(np.nextafter(t, np.float32(-np.inf)))) >= e:
+    t = np.nextafter(t, np.float32(-np.inf))
+  return t
+
+
+grid_origins = st.one_of(coords(500.0), st.integers(-400, 400).map(lambda k: k * 0.05),
+                         st.integers(-400, 400).map(lambda k: k * float(f32(0.05))))
+grid_resolutions = st.sampled_from([0.05, 0.1, 0.025, 0.03, 1.0, 0.25, 0.07]) | st.floats(0.001, 5.0)
+
+
+@given(grid_origins, grid_resolutions)
+def test_edge_thresholds_are_the_smallest_float32_at_or_above_each_edge(origin, res):
+  # Origins on the float32 grid of the resolution make edges exactly 0 or float32 values.
+  parts, r = validate.split_float64(origin), f32(res)
+  table, trusted = (np.asarray(v) for v in _edges(jnp.asarray(parts), jnp.float32(r)))
+  assert bool(trusted)                         # any map file's geometry is covered
+  assert table[0] == -np.inf and table[-1] == np.inf and table.shape == (EDGE_SIZE + 3,)
+  for n in range(EDGE_SIZE + 1):
+    e = _edge(parts, r, n)
+    assert table[n + 1] == (0.0 if e == 0 else _ceil32(e)), n
+
+
+def test_edge_thresholds_refuse_geometry_they_do_not_cover():
+  ok = lambda origin, res: bool(_edges(jnp.asarray(validate.split_float64(origin)), jnp.float32(res))[1])
+  assert ok(-15.1, 0.05) and ok(0.0, 2.0 ** -40)
+  assert not ok(0.0, 2.0 ** -41)               # resolution below 2**-40
+  assert not ok(0.1, 1e-9)                     # origin's lower parts beyond res / 4
+  inv, good = geometry.edge_reciprocal(jnp.asarray([0.05, 0.1, 3.0, 2.0 ** -40], jnp.float32))
+  assert np.asarray(good).all() and np.isfinite(np.asarray(inv)).all()
+
+
+@given(grid_origins, grid_resolutions, st.integers(-80, 150), st.sampled_from([-2, -1, 0, 1, 2, None]),
+       st.floats(0.0, 1.0))
+def test_floor_by_edges_is_the_exact_floor(origin, res, k, nudge, frac):
+  # Points on an edge (rounded to float32), a few ulps either side, inside cells, and far off.
+  parts, r = validate.split_float64(origin), f32(res)
+  table, trusted = _edges(jnp.asarray(parts), jnp.float32(r))
+  inv, inv_ok = geometry.edge_reciprocal(jnp.float32(r))
+  assert bool(trusted) and bool(inv_ok)
+  edge = float(_edge(parts, r, k))
+  x = f32(edge + frac * float(r)) if nudge is None else _nudge(f32(edge), nudge)
+  if 0 < abs(x) < np.finfo(np.float32).tiny:
+    x = f32(0.0)        # XLA reads a subnormal as 0 (the exact path too); the points are never one
+  xs = np.asarray([x, f32(edge * 1e6 + 1e7), f32(-edge * 1e6 - 1e7), np.nan, np.inf, -np.inf], np.float32)
+  got = np.asarray(_floor_edges(jnp.asarray(xs), jnp.float32(parts[0]), inv, table))
+  for xv, g in zip(xs, got):
+    if np.isnan(xv):
+      want = -1
+    elif np.isinf(xv):
+      want = EDGE_SIZE + 1 if xv > 0 else -1
+    else:
+      q = (Fraction(float(xv)) - sum(Fraction(float(p)) for p in parts)) / Fraction(float(r))
+      want = min(max(math.floor(q), -1), EDGE_SIZE)
+    assert int(g) == want, (xv, int(g), want)
+
+
+_se2_impl = jax.jit(ko._se2_batch, static_argnames=("config", "loop", "impl"))
+
+
+def _impl_inputs(case, transform, *, lower_parts=False):
+  """The `_keepout_filter_jit` arguments; `lower_parts` gives exactly-float32 geometry zero
+  lower parts, so fleets of both kinds share one pytree structure (one compile)."""
+  cm, mask, state, window, mask_index, enabled = case
+  if lower_parts:
+    zeros = lambda x, shape: jnp.zeros(shape, jnp.float32) if x is None else x
+    cm = dataclasses.replace(cm, origin_lo=zeros(cm.origin_lo, (B, 2, 2)),
+                             resolution_lo=zeros(cm.resolution_lo, (B, 2)))
+    mask = dataclasses.replace(mask, origin_lo=zeros(mask.origin_lo, (M, 2, 2)))
+  idx, ok, _, en, win, tf = ko._batched_inputs(cm, mask, jnp.zeros((B, 3)), mask_index, enabled, window, transform,
+                                               "test")
+  return cm, mask, idx, ok, ko._fill_error(state, B), win, en, tf
+
+
+@pytest.mark.parametrize("n", range(3))
+def test_other_frame_kernels_equal_the_exact_path(n):
+  # Centres on mask-cell edges and one ulp off (cases 0 and 1), random transforms (case 2).
+  # ("codes", the default, is run by the tests above.)
+  case, tf = _se2_cases()[n]
+  args = _impl_inputs(case, jnp.asarray(tf), lower_parts=True)
+  # Escape mode changes only the write rule: the byte one is shared with "codes", the word one not.
+  for cfg, runs in ((PLAIN, [("vmap", "fused"), ("vmap", "thresholds"), ("vmap", "thresholds_packed"),
+                             ("map", "thresholds")]),
+                    (ESCAPE, [("vmap", "thresholds"), ("vmap", "thresholds_packed")])):
+    want = ko._keepout_filter_jit(*args, config=cfg, exact=True)
+    for loop, impl in runs:
+      cost, st = _se2_impl(*args, config=cfg, loop=loop, impl=impl)
+      np.testing.assert_array_equal(np.asarray(cost), np.asarray(want[0].cost), err_msg=f"{impl} {loop} {cfg}")
+      np.testing.assert_array_equal(np.asarray(st.last_pose_lethal), np.asarray(want[1].last_pose_lethal))
+  assert (np.asarray(want[0].cost) != np.asarray(case[0].cost)).any()
+
+
+def test_other_frame_kernels_run_the_exact_path_where_edge_tables_are_untrusted():
+  # A 2**-41 m mask (below the tables' range): the robots on it must run the exact path.
+  rng = np.random.default_rng(3)
+  mres, res = 2.0 ** -41, 2.0 ** -42
+  case = _fleet(rng, res, mres, np.round(rng.uniform(0, 4, (B, 2))) * res, [(0.0, 0.0), (2 * mres, -mres)])
+  tf = np.zeros((B, 3), np.float32)
+  tf[:, 2] = rng.uniform(-np.pi, np.pi, B)
+  tf[:, :2] = rng.uniform(2, 8, (B, 2)) * mres
+  args = _impl_inputs(case, jnp.asarray(tf), lower_parts=True)
+  assert not np.asarray(ko._se2_edge_tables(args[1])[-1]).any()
+  want = np.asarray(ko._keepout_filter_jit(*args, config=PLAIN, exact=True)[0].cost)
+  assert (want != np.asarray(case[0].cost)).any()
+  for impl in ("thresholds", "thresholds_packed"):
+    np.testing.assert_array_equal(np.asarray(_se2_impl(*args, config=PLAIN, loop="vmap", impl=impl)[0]), want)
+
+
+def _exact_vectors(cm, mask, idx, ok, win, en):
+  """Per-robot exact index vectors and window flags (the exact arithmetic, no brackets)."""
+  h, w = cm.cost.shape[1:]
+  hm, wm = mask.data.shape[1:]
+
+  def one(origin, origin_lo, res, res_lo, i, ok, win, en):
+    return ko._same_frame_prologue_one((h, w), geometry.origin_terms(origin, origin_lo),
+                                       geometry.resolution_terms(res, res_lo), ko._mask_origin(mask, i),
+                                       mask.resolution[i], (hm, wm), win, en, ok, exact=True)
+  (cells, _, flags, _) = jax.vmap(one)(cm.origin, cm.origin_lo, cm.resolution, cm.resolution_lo, idx, ok, win, en)
+  return cells, flags
+
+
+_other_res = jax.jit(ko._other_res_batch, static_argnames=("config", "impl"))
+
+
+@pytest.mark.parametrize("n", [2, 3, 4])
+def test_other_resolution_kernels_equal_the_exact_path(n):
+  # Finer mask (every centre on an edge: the box kernels fall back), coarser masks (they run).
+  case = _same_frame_cases()[n]
+  cm, mask, idx, ok, state, win, en, _ = _impl_inputs(case, None)
+  ((mx, vx), (my, vy)), (col_ok, row_ok, _) = _exact_vectors(cm, mask, idx, ok, win, en)
+  cells = (cm.cost, idx, mx, vx, my, vy, col_ok, row_ok, state)
+  fits = (jax.vmap(ko._span)(mx, col_ok & vx)[1] <= W) & (jax.vmap(ko._span)(my, row_ok & vy)[1] <= H)
+  assert bool(jnp.all(fits)) == (n != 2)
+  # "rows" and "window" share their write rule; "packed" has its own (SWAR words).
+  for cfg, impls in ((PLAIN, ko._GATHER_IMPLS), (ESCAPE, ("packed", "rows"))):
+    want = np.asarray(ko._keepout_filter_jit(cm, mask, idx, ok, state, win, en, None, config=cfg, exact=True)[0].cost)
+    for impl in impls:
+      np.testing.assert_array_equal(np.asarray(_other_res(cells, mask, config=cfg, impl=impl)), want, err_msg=impl)
+  assert (want != np.asarray(cm.cost)).any()
+
+
+def test_gather_impl_reaches_the_same_frame_batch():
+  args = _impl_inputs(_same_frame_cases()[3], None)
+  want = ko._keepout_filter_jit(*args, config=ESCAPE, exact=True)
+  same_frame = jax.jit(ko._same_frame_batch, static_argnames=("config", "loop", "packed", "gather_impl"))
+  cost, st = same_frame(*args[:-1], config=ESCAPE, loop="vmap", gather_impl="packed")
+  np.testing.assert_array_equal(np.asarray(cost), np.asarray(want[0].cost))
+  np.testing.assert_array_equal(np.asarray(st.last_pose_lethal), np.asarray(want[1].last_pose_lethal))
+  with pytest.raises(ValueError, match="gather_impl must be one of"):
+    same_frame(*args[:-1], config=ESCAPE, loop="vmap", gather_impl="nope")
+  with pytest.raises(ValueError, match="impl must be one of"):
+    _se2_impl(*_impl_inputs(_se2_cases()[2][0], jnp.zeros((B, 3))), config=PLAIN, loop="vmap", impl="nope")
