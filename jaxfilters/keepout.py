@@ -1005,8 +1005,11 @@ _SE2_IMPLS = ("codes", "fused", "thresholds", "thresholds_packed")
 # On XLA:CPU (2-core VM, B = 256, 200x200, 2000x2000 mask, CPU time, min of 7) "codes" ran
 # 38-39 ms, "thresholds" 42-44 ms (it compiles in 3 s instead of 4-6 s): XLA:CPU does not
 # vectorise a loop that reads a table, so the CPU keeps "codes" unless the lead decides
-# the compile time is worth more.
-_SE2_IMPL = "codes"
+# the compile time is worth more. On an H100 (benchmarks/keepout_probe.py, B = 16384, 200x200,
+# 2000x2000 mask, 2026-11-22): codes 63.1, fused 82.3, thresholds 99.9, thresholds_packed
+# 101.9 Gcell/s, all bit-equal to the exact path incl. the edge fleets; the plain (inexact)
+# float32 floor + gather ceiling 207 Gcell/s.
+_SE2_IMPL = "thresholds_packed"
 _SE2_IMPL_CPU = "codes"
 
 
@@ -1120,7 +1123,11 @@ def _se2_edges_batch(cost, mask, axes, idx, state, window, run, *, config: Keepo
 # (tests/test_keepout_paths.py).
 
 _GATHER_IMPLS = ("gather", "packed", "rows", "window")
-_GATHER_IMPL = "gather"
+# On an H100 (benchmarks/keepout_probe.py, B = 16384, 200x200, mask 0.1 m 2000x2000 under a
+# 0.05 m costmap, 2026-11-22): gather 248, packed 409, rows 127, window 321 Gcell/s, all
+# bit-equal incl. the edge fleets. XLA:CPU never runs this function by default (its loop is
+# "map"), and vectorises "packed" badly (69 ms against 11 ms for "gather" at B = 256).
+_GATHER_IMPL = "packed"
 
 
 def _m1_table(data):
