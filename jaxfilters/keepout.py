@@ -1044,7 +1044,18 @@ def keepout_filter(costmap: Costmap, mask: FilterMask, poses, state: KeepoutStat
       costmap, mask, poses, mask_index, enabled, window, transform, "keepout_filter")
   del poses
   state = _fill_error(state, costmap.num_robots)
-  return _keepout_filter_jit(costmap, mask, idx, idx_ok, state, window, enabled, transform, config=config)
+  return _keepout_filter_jit(costmap, mask, idx, idx_ok, state, window, enabled, transform,
+                             config=_process_config(config))
+
+
+def _process_config(config: KeepoutConfig) -> KeepoutConfig:
+  """The options process() uses: the robot-in-zone test lives in updateBounds, so fleets with
+  different footprints share one compiled filter."""
+  if config.robot_in_zone == "center":
+    return config
+  return KeepoutConfig(override_lethal_cost=config.override_lethal_cost,
+                       lethal_override_cost=config.lethal_override_cost,
+                       aligned_fast_path=config.aligned_fast_path)
 
 
 def _path_report(costmap: Costmap, mask: FilterMask, transform=None, mask_index=None) -> dict:
