@@ -162,3 +162,16 @@ def test_nav2_centre_test_traps_where_the_footprint_test_releases(escape_run):
     assert bool(on_f[k]) and int(here_f[k]) < 253 and not bool(stop_f[k])          # footprint: drives on
     checked += 1
   assert checked >= 2
+
+
+@pytest.mark.parametrize("argv, words", [
+    (["--robots-in-keepout", "2"], ["--robots-in-keepout needs --keepout-escape"]),
+    (["--keepout-escape", "footprint", "--robots-in-keepout", "-1"], ["--robots-in-keepout must be >= 0"]),
+    (["--keepout-escape", "footprint", "--robots", "4", "--robots-in-keepout", "5"], ["robots per world (4)"]),
+    (["--keepout-escape", "sideways"], ["invalid choice: 'sideways'"]),
+])
+def test_fleet_escape_options_are_usage_errors(argv, words, capsys, tmp_path):
+  from sims import cli
+  rc = cli.main(["fleet", "--out", str(tmp_path / "o"), "--steps", "1", *argv])
+  err = capsys.readouterr().err
+  assert rc == 2 and all(w in err for w in words), err
