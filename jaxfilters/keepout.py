@@ -12,6 +12,11 @@ Nav2's filter runs in two phases per costmap cycle, and so does this module:
   (`data > old or old == 255`), skipping unknown mask cells; in escape mode the
   written value is `lethal_override_cost`.
 
+Beyond Nav2 (an option; Nav2's centre-cell test stays the default):
+`KeepoutConfig(robot_in_zone="footprint")` decides escape mode over the robot's
+footprint, with hysteresis (issue #6505, PR #6526; the rule is in
+jaxfilters/footprint.py). Only updateBounds changes: process() writes as Nav2.
+
 Both are written for one robot (`*_one`) and vmapped once at the public edge.
 Lanes (seed design: "covered by KeepoutFilter") are keepout masks with graded
 values 1..99, which give intermediate costs round(2.54 * d).
@@ -84,8 +89,9 @@ class KeepoutConfig:
   """Static keepout options (Nav2 parameters `<filter>.override_lethal_cost` etc.).
 
   Attributes:
-    override_lethal_cost: escape mode; while the robot's centre is in a lethal
-      keepout cell, every cell the filter writes gets `lethal_override_cost`.
+    override_lethal_cost: escape mode; while the robot's centre (or, with
+      robot_in_zone "footprint", its footprint) is in a lethal keepout cell,
+      every cell the filter writes gets `lethal_override_cost`.
     lethal_override_cost: clamped to [0, 252] like Nav2 (MAX_NON_OBSTACLE).
     aligned_fast_path: let `keepout_filter` read a robot's mask cells as one
       slice (same integers, see `_consecutive`) when, at run time, its exact

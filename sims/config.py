@@ -168,8 +168,10 @@ class FleetConfig:
       `override_lethal_cost`, and its centre-cell test) or 'footprint' (the
       same with the footprint test of jaxfilters/footprint.py and
       `band_clearance`). With escape, a robot in a zone heads for the nearest
-      way out (the exit field, WorldParams.nav.dist[S]) and the footprint
-      keepout metrics are recorded.
+      way out (the exit field, WorldParams.nav.dist[S]), the footprint keepout
+      metrics are recorded, and the inflation's inscribed radius is raised to
+      `world.keepout_inscribed_radius` so that the planner, which checks the
+      cell under the robot centre, keeps the footprint out of zones.
     robots_in_keepout: robots per world that start with their footprint on a
       lethal keepout cell (spawn points from WorldParams.zone_spawns); the
       rest start on clear cells.
