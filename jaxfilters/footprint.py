@@ -168,11 +168,31 @@ def band_clearance(*, inscribed_radius: float, resolution: float, robot_radius: 
 
   Returns:
     metres, >= 0 (with 1 mm added for float32 rounding).
+
+  Raises:
+    ValueError: as `footprint_radii`, or a polygon that does not contain the
+      robot origin (its inscribed radius then bounds nothing).
   """
   own, _ = footprint_radii(robot_radius=robot_radius, footprint=footprint, footprint_padding=0.0)
+  if footprint is not None and not _contains_origin(footprint):
+    raise ValueError(f"band_clearance: the footprint must contain the robot origin (0, 0) strictly inside; "
+                     f"got {short_repr(footprint)}")
   if robot_radius is not None:
     own = float(robot_radius)          # the disc itself, not Nav2's 16-gon
   return max(0.0, float(inscribed_radius) - own) + float(resolution) * math.sqrt(0.5) + 1e-3
+
+
+def _contains_origin(footprint) -> bool:
+  """(0, 0) strictly inside the polygon (even-odd, float64) and not on an edge."""
+  pts = [(float(x), float(y)) for x, y in footprint]
+  inside = False
+  for k, (ax, ay) in enumerate(pts):
+    bx, by = pts[(k + 1) % len(pts)]
+    if ax * by - ay * bx == 0 and min(ax, bx) <= 0 <= max(ax, bx) and min(ay, by) <= 0 <= max(ay, by):
+      return False
+    if (ay > 0) != (by > 0) and 0 < ax - ay * (bx - ax) / (by - ay):
+      inside = not inside
+  return inside
 
 
 def _covered(qx, qy, dx, dy, polygon, radius, margin):

@@ -464,3 +464,14 @@ def test_band_clearance_leaves_the_centre_cell_out_of_the_band():
         released += 1
         assert cost[int(pose[1] / 0.05), int(pose[0] / 0.05)] < 253, pose
     assert released > 100
+
+
+def test_band_clearance_needs_the_origin_inside_the_footprint():
+  with pytest.raises(ValueError, match="must contain the robot origin"):
+    fp.band_clearance(inscribed_radius=0.3, resolution=0.05, footprint=((0.1, 0.1), (0.5, 0.1), (0.5, 0.4)))
+  with pytest.raises(ValueError, match="must contain the robot origin"):       # the origin on an edge
+    fp.band_clearance(inscribed_radius=0.3, resolution=0.05, footprint=((0.0, -0.2), (0.4, -0.2), (0.4, 0.2),
+                                                                          (0.0, 0.2)))
+  got = fp.band_clearance(inscribed_radius=0.3, resolution=0.05, footprint=((0.3, 0.2), (-0.2, 0.2), (-0.2, -0.2),
+                                                                              (0.3, -0.2)))
+  assert got == pytest.approx(0.3 - 0.2 + 0.05 * math.sqrt(0.5) + 1e-3)
