@@ -427,13 +427,13 @@ def test_as_layer_escape_has_no_band_and_band_clearance_releases_outside_it():
   for cfg in (centre, foot):
     st, cost, _ = cycle(1.3, cfg, jf.KeepoutState.create(1))
     assert bool(st.is_pose_lethal[0]) and (cost[:, 20:] == 252).all() and cost[:, :20].max() == 0
-  # Driving out along -x in 2 cm steps (a cycle per step), as a controller would while the robot's
+  # Driving out along -x in 3 cm steps (a cycle per step), as a controller would while the robot's
   # centre cell is below 253. Nav2's centre test ends escape as the centre leaves the zone: its cell is
   # then in the inscribed band (the trap of #6505). The footprint test with band_clearance never does.
   for cfg, trapped in ((centre, True), (foot, False)):
     st = jf.KeepoutState.create(1)
     stuck_at = None
-    for x in np.arange(1.3, 0.3, -0.02, dtype=np.float32):
+    for x in np.arange(1.3, 0.3, -0.03, dtype=np.float32):
       st, cost, here = cycle(float(x), cfg, st)
       if here >= 253:
         stuck_at = float(x)
