@@ -1059,9 +1059,9 @@ def _process_config(config: KeepoutConfig) -> KeepoutConfig:
   different footprints share one compiled filter."""
   if config.robot_in_zone == "center":
     return config
-  return KeepoutConfig(override_lethal_cost=config.override_lethal_cost,
-                       lethal_override_cost=config.lethal_override_cost,
-                       aligned_fast_path=config.aligned_fast_path)
+  # replace() keeps every other option (a new one included) as the caller set it.
+  return dataclasses.replace(config, robot_in_zone="center", footprint=None, robot_radius=None,
+                             min_mask_resolution=None, escape_clearance=0.0)
 
 
 def _path_report(costmap: Costmap, mask: FilterMask, transform=None, mask_index=None) -> dict:
