@@ -12,6 +12,11 @@ Nav2's filter runs in two phases per costmap cycle, and so does this module:
   (`data > old or old == 255`), skipping unknown mask cells; in escape mode the
   written value is `lethal_override_cost`.
 
+Beyond Nav2 (an option; Nav2's centre-cell test stays the default):
+`KeepoutConfig(robot_in_zone="footprint")` decides escape mode over the robot's
+footprint, with hysteresis (issue #6505, PR #6526; the rule is in
+jaxfilters/footprint.py). Only updateBounds changes: process() writes as Nav2.
+
 Both are written for one robot (`*_one`) and vmapped once at the public edge.
 Lanes (seed design: "covered by KeepoutFilter") are keepout masks with graded
 values 1..99, which give intermediate costs round(2.54 * d).
@@ -50,6 +55,7 @@ import jax.numpy as jnp
 import numpy as np
 
 from jaxfilters import constants
+from jaxfilters import footprint as footprint_lib
 from jaxfilters import geometry
 from jaxfilters import keepout_pallas
 from jaxfilters.keepout_pallas import PallasTuning
@@ -85,8 +91,9 @@ class KeepoutConfig:
   """Static keepout options (Nav2 parameters `<filter>.override_lethal_cost` etc.).
 
   Attributes:
-    override_lethal_cost: escape mode; while the robot's centre is in a lethal
-      keepout cell, every cell the filter writes gets `lethal_override_cost`.
+    override_lethal_cost: escape mode; while the robot's centre (or, with
+      robot_in_zone "footprint", its footprint) is in a lethal keepout cell,
+      every cell the filter writes gets `lethal_override_cost`.
     lethal_override_cost: clamped to [0, 252] like Nav2 (MAX_NON_OBSTACLE).
     aligned_fast_path: let `keepout_filter` read a robot's mask cells as one
       slice (same integers, see `_consecutive`) when, at run time, its exact
@@ -101,12 +108,40 @@ class KeepoutConfig:
       elsewhere). The gather and other-frame paths are XLA either way.
     pallas: static `keepout_pallas.PallasTuning` of the kernel (layout, block,
       warps, interpreter).
+    robot_in_zone: the escape mode's robot-in-zone test: "center" (Nav2: the
+      robot centre's mask cell) or "footprint" (beyond Nav2, issue #6505 / PR
+      #6526: any lethal mask cell whose centre the footprint covers, or the
+      centre test; exact rule and hysteresis in jaxfilters/footprint.py). Needs
+      override_lethal_cost.
+    footprint: "footprint" mode: polygon ((x, y), ...) in the robot frame
+      (metres, >= 3 vertices, float32 values), or None.
+    robot_radius: "footprint" mode: disc radius (m) instead of a polygon.
+    min_mask_resolution: "footprint" mode: the finest mask resolution (m) it
+      meets; sizes the static window of mask cells the test reads (a finer
+      mask raises eagerly and sets `KeepoutState.error` under jit).
+    escape_clearance: "footprint" mode, m >= 0: escape, once on, stays on until
+      the footprint grown by this distance is clear of lethal cells
+      (`footprint.band_clearance` gives the value that leaves the robot's
+      centre cell outside the zone's inscribed band).
   """
   override_lethal_cost: bool = False
   lethal_override_cost: int = constants.MAX_NON_OBSTACLE
   aligned_fast_path: bool = True
   kernel: str = "xla"
   pallas: PallasTuning = PallasTuning()
+  robot_in_zone: str = "center"
+  footprint: tuple | None = None
+  robot_radius: float | None = None
+  min_mask_resolution: float | None = None
+  escape_clearance: float = 0.0
+
+  @property
+  def footprint_window(self) -> int:
+    """n: the footprint test reads (2n + 1) x (2n + 1) mask cells per robot (0 in "center" mode)."""
+    if self.robot_in_zone != "footprint":
+      return 0
+    return footprint_lib.window_cells(self.footprint, self.robot_radius, self.escape_clearance,
+                                      self.min_mask_resolution)
 
   def __post_init__(self):
     keepout_pallas.check_kernel(self.kernel)
@@ -122,6 +157,11 @@ class KeepoutConfig:
     # Nav2 clamps rather than rejects.
     object.__setattr__(self, "lethal_override_cost",
                        int(min(max(int(self.lethal_override_cost), 0), constants.MAX_NON_OBSTACLE)))
+    opts = footprint_lib.check_options(self.robot_in_zone, self.footprint, self.robot_radius,
+                                       self.min_mask_resolution, self.escape_clearance,
+                                       self.override_lethal_cost)
+    for name, value in opts.items():
+      object.__setattr__(self, name, value)
 
 
 @_dataclass
@@ -135,7 +175,10 @@ class KeepoutState:
       the robot is in a zone; (+inf, +inf, -inf, -inf) when empty.
     error: bool [B], the last call could not run for this robot because its
       traced `mask_index` was outside [0, M): nothing was written and the
-      rest of its state was kept. None in a hand-built state.
+      rest of its state was kept. After `keepout_update_bounds` with a
+      "footprint" KeepoutConfig it is also True where the mask is finer than
+      `min_mask_resolution` (the footprint test saw only its window).
+      None in a hand-built state.
   """
   is_pose_lethal: jax.Array
   last_pose_lethal: jax.Array
@@ -172,7 +215,8 @@ def pose_in_lethal_zone_one(data, mask_origin, mask_res, xy, mask_origin_lo=None
 
 def keepout_update_bounds_one(state, data, mask_origin, mask_res, pose, bounds,
                               master_origin, master_res, new_mask, enabled, transform,
-                              *, override_lethal_cost: bool, mask_origin_lo=None, index_ok=True):
+                              *, override_lethal_cost: bool, mask_origin_lo=None, index_ok=True,
+                              config: KeepoutConfig | None = None):
   """KeepoutFilter::updateBounds for one robot (spec §4.2).
 
   Args:
@@ -189,6 +233,12 @@ def keepout_update_bounds_one(state, data, mask_origin, mask_res, pose, bounds,
     mask_origin_lo: optional float32 [2, 2] parts of a float64 mask origin.
     index_ok: bool [], this robot's mask_index is in range (else nothing runs
       and `error` is set).
+    config: static KeepoutConfig whose `robot_in_zone` "footprint" (with
+      override_lethal_cost) replaces the centre test by the footprint test of
+      jaxfilters/footprint.py: the centre test OR a covered lethal cell, the
+      footprint grown by `escape_clearance` while `state.is_pose_lethal` was
+      True. `error` is then also set where the mask is finer than
+      `min_mask_resolution` (the window read is still tested). None: Nav2's test.
 
   Returns:
     (new state, new bounds).
@@ -203,8 +253,17 @@ def keepout_update_bounds_one(state, data, mask_origin, mask_res, pose, bounds,
   if transform is not None:
     xy = jnp.stack(geometry.transform_points(transform, xy[0], xy[1]))
   lethal = jnp.asarray(False)
+  window_bad = jnp.asarray(False)
   if override_lethal_cost:
     lethal = pose_in_lethal_zone_one(data, mask_origin, mask_res, xy, mask_origin_lo)
+    if config is not None and config.robot_in_zone == "footprint":
+      yaw = pose[2] if transform is None else pose[2] + transform[2]
+      margin = jnp.where(state.is_pose_lethal, jnp.float32(config.escape_clearance), jnp.float32(0.0))
+      lethal = lethal | footprint_lib.footprint_in_zone_one(
+          data, mask_origin, mask_res, jnp.stack([xy[0], xy[1], yaw]), polygon=config.footprint,
+          radius=config.robot_radius, window=config.footprint_window, margin=margin,
+          mask_origin_lo=mask_origin_lo)
+      window_bad = ~footprint_lib.window_fits(mask_res, config.min_mask_resolution)
   keep_box = override_lethal_cost & (lethal | state.last_pose_lethal)
   union = jnp.concatenate([jnp.minimum(state.acc_box[:2], bounds[:2]),
                            jnp.maximum(state.acc_box[2:], bounds[2:])])
@@ -217,7 +276,7 @@ def keepout_update_bounds_one(state, data, mask_origin, mask_res, pose, bounds,
   out_bounds = jnp.where(new_mask, grown, normal_bounds)
   run = enabled & index_ok
   out_state = jax.tree.map(lambda x, y: jnp.where(run, x, y), out_state, state)
-  out_state = _with_error(out_state, ~index_ok)
+  out_state = _with_error(out_state, ~index_ok | (run & ~new_mask & window_bad))
   return out_state, jnp.where(run, out_bounds, bounds)
 
 
@@ -1339,7 +1398,18 @@ def keepout_filter(costmap: Costmap, mask: FilterMask, poses, state: KeepoutStat
       costmap, mask, poses, mask_index, enabled, window, transform, "keepout_filter")
   del poses
   state = _fill_error(state, costmap.num_robots)
-  return _keepout_filter_jit(costmap, mask, idx, idx_ok, state, window, enabled, transform, config=config)
+  return _keepout_filter_jit(costmap, mask, idx, idx_ok, state, window, enabled, transform,
+                             config=_process_config(config))
+
+
+def _process_config(config: KeepoutConfig) -> KeepoutConfig:
+  """The options process() uses: the robot-in-zone test lives in updateBounds, so fleets with
+  different footprints share one compiled filter."""
+  if config.robot_in_zone == "center":
+    return config
+  # replace() keeps every other option (a new one included) as the caller set it.
+  return dataclasses.replace(config, robot_in_zone="center", footprint=None, robot_radius=None,
+                             min_mask_resolution=None, escape_clearance=0.0)
 
 
 def _path_report(costmap: Costmap, mask: FilterMask, transform=None, mask_index=None) -> dict:
@@ -1416,7 +1486,15 @@ def keepout_update_bounds(costmap: Costmap, mask: FilterMask, poses, state: Keep
     new_mask: optional bool [B] or scalar, a new mask arrived since last cycle.
 
   Returns:
-    (new KeepoutState, new bounds float32 [B, 4]).
+    (new KeepoutState, new bounds float32 [B, 4]). With
+    `config.robot_in_zone == "footprint"`, `is_pose_lethal` comes from the
+    footprint test (jaxfilters/footprint.py) and `error` is also set for a
+    robot whose mask is finer than `config.min_mask_resolution` (traced masks;
+    a concrete one raises).
+
+  Raises:
+    TypeError / ValueError: as keepout_filter; a concrete mask finer than
+      `config.min_mask_resolution` in "footprint" mode.
   """
   if not isinstance(config, KeepoutConfig):
     raise TypeError(f"config must be a KeepoutConfig; got {type(config).__name__}")
@@ -1428,19 +1506,32 @@ def keepout_update_bounds(costmap: Costmap, mask: FilterMask, poses, state: Keep
     raise ValueError(f"bounds must be float [B, 4] = ({b}, 4); got {tuple(bounds.shape)}")
   new_mask = per_robot_bool("new_mask", new_mask, b, default=False)
   state = _fill_error(state, b)
+  _check_footprint_window(mask, config)
+  footprint = config if config.robot_in_zone == "footprint" else None
   return _update_bounds_jit(costmap, mask, idx, idx_ok, poses, state, bounds, new_mask, enabled, transform,
-                            override_lethal_cost=config.override_lethal_cost)
+                            override_lethal_cost=config.override_lethal_cost, footprint=footprint)
 
 
-@functools.partial(jax.jit, static_argnames=("override_lethal_cost",))
+def _check_footprint_window(mask: FilterMask, config: KeepoutConfig) -> None:
+  """Eagerly: a concrete mask finer than `min_mask_resolution` raises (under jit: `error`)."""
+  if config.robot_in_zone != "footprint" or isinstance(mask.resolution, jax.core.Tracer):
+    return
+  res = np.asarray(mask.resolution, np.float32)
+  if np.any(res < np.float32(config.min_mask_resolution)):
+    raise ValueError(f"keepout_update_bounds: mask resolution {float(res.min()):g} m is finer than "
+                     f"KeepoutConfig.min_mask_resolution = {config.min_mask_resolution:g} m, which sizes the "
+                     "footprint test's window; build the config with min_mask_resolution <= the finest mask")
+
+
+@functools.partial(jax.jit, static_argnames=("override_lethal_cost", "footprint"))
 def _update_bounds_jit(costmap, mask, idx, idx_ok, poses, state, bounds, new_mask, enabled, transform, *,
-                       override_lethal_cost):
+                       override_lethal_cost, footprint=None):
   with jax.named_scope("keepout_update_bounds"):
     def one(st, i, ok, pose, bnd, origin, res, nm, en, tf):
       return keepout_update_bounds_one(
           st, mask.data[i], mask.origin[i], mask.resolution[i], pose, bnd, origin, res, nm, en, tf,
           override_lethal_cost=override_lethal_cost,
-          mask_origin_lo=None if mask.origin_lo is None else mask.origin_lo[i], index_ok=ok)
+          mask_origin_lo=None if mask.origin_lo is None else mask.origin_lo[i], index_ok=ok, config=footprint)
 
     tf_axis = None if transform is None else 0
     return jax.vmap(one, in_axes=(0, 0, 0, 0, 0, 0, 0, 0, 0, tf_axis))(

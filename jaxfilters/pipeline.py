@@ -5,7 +5,12 @@
 the filters run on the combined map only. So filter output is never inflated.
 `keepout_as_layer=True` models users who list the keepout filter under
 `plugins:` before the inflation layer (docs PR #972): it then runs on the
-primary map and its zones are inflated.
+primary map and its zones are inflated. With escape mode on, cells written
+with `lethal_override_cost` (<= 252) are not inflation sources, so a zone the
+robot is escaping has no inscribed band; with `KeepoutConfig(robot_in_zone=
+"footprint")` escape lasts until the whole footprint (grown by
+`escape_clearance`) is out, so the band that returns cannot hold the robot
+(issue #6505; jaxfilters/footprint.py).
 
 Each call is one Nav2 cycle: every layer's and filter's updateBounds, then
 every updateCosts. The layers here redraw the whole map (a rolling local
@@ -111,6 +116,7 @@ def costmap_pipeline(static_data, origin, resolution, poses, *, config: LayersCo
       # ObstacleLayer uses max-combination: marking raises a cell to lethal.
       cost = jnp.where(obstacles, jnp.uint8(constants.LETHAL_OBSTACLE), cost)
     primary = _geometry(cost, origin, resolution)
+    bounds_error = None
     if keepout_mask is not None:
       # updateBounds pass (spec §2.5, §4.2): layers redraw the whole map.
       b = cost.shape[0]
@@ -123,6 +129,7 @@ def costmap_pipeline(static_data, origin, resolution, poses, *, config: LayersCo
                                                jnp.broadcast_to(bounds, (b, 4)),
                                                new_mask=new_keepout_mask, mask_index=mask_index,
                                                enabled=enabled, config=config.keepout)
+      bounds_error = keepout_state.error
     if keepout_mask is not None and config.keepout_as_layer:
       primary, keepout_state = keepout_filter(primary, keepout_mask, poses, keepout_state,
                                               mask_index=mask_index, enabled=enabled, config=config.keepout)
@@ -132,6 +139,10 @@ def costmap_pipeline(static_data, origin, resolution, poses, *, config: LayersCo
     if keepout_mask is not None and not config.keepout_as_layer:
       combined, keepout_state = keepout_filter(primary, keepout_mask, poses, keepout_state,
                                                mask_index=mask_index, enabled=enabled, config=config.keepout)
+    if bounds_error is not None:
+      # process() sets `error` for its own reason (mask_index); keep updateBounds' too
+      # (a "footprint" config's mask finer than min_mask_resolution).
+      keepout_state = dataclasses.replace(keepout_state, error=keepout_state.error | bounds_error)
     speed = None
     if speed_mask is not None:
       speed_state, speed = speed_filter(speed_mask, poses, speed_state, mask_index=mask_index, enabled=enabled)

@@ -10,6 +10,7 @@ import dataclasses
 import math
 
 IMPLS = ("jax", "warp")
+KEEPOUT_ESCAPE = ("off", "center", "footprint")
 
 
 def _positive(owner: str, name: str, value, *, allow_zero: bool = False) -> float:
@@ -90,6 +91,12 @@ class PlannerConfig:
     reverse_speed: m/s, the backing-up speed candidates use (recovery mode only).
     keep_right_weight: score against left turns while another robot is ahead
       within 2 m (right-hand traffic, so robots meeting head-on both veer right).
+    inscribed_is_collision: a rollout point on an inscribed (253) cell collides
+      even when the robot stands on one: Nav2's controllers' rule for a
+      circular robot (the centre on 253 means the footprint touches an
+      obstacle). Off by default, so a robot can leave another robot's
+      inflation; the keepout escape scenarios turn it on, where it is the rule
+      that traps a robot in a zone's inscribed band (issue #6505).
   """
   num_speeds: int = 6
   num_yaw_rates: int = 9
@@ -105,8 +112,11 @@ class PlannerConfig:
   recovery_duration: float = 3.0
   reverse_speed: float = 0.15
   keep_right_weight: float = 0.3
+  inscribed_is_collision: bool = False
 
   def __post_init__(self):
+    if not isinstance(self.inscribed_is_collision, bool):
+      raise ValueError(f"PlannerConfig.inscribed_is_collision must be a bool; got {self.inscribed_is_collision!r}")
     object.__setattr__(self, "num_speeds", _count("PlannerConfig", "num_speeds", self.num_speeds, 2))
     object.__setattr__(self, "num_yaw_rates", _count("PlannerConfig", "num_yaw_rates", self.num_yaw_rates))
     for name in ("horizon", "rollout_dt", "goal_tolerance", "recovery_after", "recovery_duration"):
@@ -152,6 +162,19 @@ class FleetConfig:
       velocity actuators lag the command with a 0.01 s time constant).
     impl: MJX implementation, 'jax' (default, the CPU path) or 'warp' (GPU
       only, needs warp-lang).
+    keepout_escape: the local costmaps' keepout: 'off' (Nav2's default
+      placement: the filter after inflation, no escape mode), 'center' (the
+      filter as a layer before inflation with Nav2's escape mode,
+      `override_lethal_cost`, and its centre-cell test) or 'footprint' (the
+      same with the footprint test of jaxfilters/footprint.py and
+      `band_clearance`). With escape, a robot in a zone heads for the nearest
+      way out (the exit field, WorldParams.nav.dist[S]), the footprint keepout
+      metrics are recorded, and the inflation's inscribed radius is raised to
+      `world.keepout_inscribed_radius` so that the planner, which checks the
+      cell under the robot centre, keeps the footprint out of zones.
+    robots_in_keepout: robots per world that start with their footprint on a
+      lethal keepout cell (spawn points from WorldParams.zone_spawns); the
+      rest start on clear cells.
   """
   robots_per_world: int = 8
   robot: RobotConfig = RobotConfig()
@@ -170,6 +193,8 @@ class FleetConfig:
   near_miss_margin: float = 0.05
   speed_tolerance: float = 0.01
   impl: str = "jax"
+  keepout_escape: str = "off"
+  robots_in_keepout: int = 0
 
   def __post_init__(self):
     o = "FleetConfig"
@@ -189,6 +214,15 @@ class FleetConfig:
       raise ValueError(f"{o}.limit_angular must be a bool; got {self.limit_angular!r}")
     if self.impl not in IMPLS:
       raise ValueError(f"{o}.impl must be one of {IMPLS}; got {self.impl!r}")
+    if self.keepout_escape not in KEEPOUT_ESCAPE:
+      raise ValueError(f"{o}.keepout_escape must be one of {KEEPOUT_ESCAPE}; got {self.keepout_escape!r}")
+    object.__setattr__(self, "robots_in_keepout", _count(o, "robots_in_keepout", self.robots_in_keepout, 0))
+    if self.robots_in_keepout > self.robots_per_world:
+      raise ValueError(f"{o}.robots_in_keepout must be <= robots_per_world ({self.robots_per_world}); "
+                       f"got {self.robots_in_keepout}")
+    if self.robots_in_keepout and self.keepout_escape == "off":
+      raise ValueError(f"{o}.robots_in_keepout = {self.robots_in_keepout} needs keepout_escape 'center' or "
+                       "'footprint': without escape mode a robot started in a zone is deadlocked (spec §4.6)")
     if self.num_stations < 2:
       raise ValueError(f"{o}.num_stations must be >= 2; got {self.num_stations}")
     _ratio(o, "controller_hz", self.controller_hz, "costmap_hz", self.costmap_hz)

@@ -18,6 +18,12 @@ One `step` is one local-costmap period (1 / costmap_hz, 0.2 s by default):
    linear (and optionally angular) velocity to the limit in force -> write ctrl
    -> `lax.scan` over physics steps (mjx.step), accumulating metrics.
 
+With keepout escape (FleetConfig.keepout_escape 'center' or 'footprint') the
+keepout filter runs as a layer before inflation with escape mode; a robot
+whose keepout state says it is in a zone steers by the exit field (the
+shortest way out) instead of its goal's field, and the footprint keepout
+metrics are recorded. `robots_in_keepout` robots start in zones.
+
 All rates are static, so nothing inside a step branches on a traced counter
 (under `vmap` a `lax.cond` on batched data would run both branches).
 """
@@ -34,6 +40,7 @@ import mujoco
 import numpy as np
 from mujoco import mjx
 
+from jaxfilters.footprint import window_cells
 from jaxfilters.keepout import KeepoutState
 from jaxfilters.speed import SpeedState, speed_filter
 from jaxfilters.types import Costmap, _dataclass
@@ -235,7 +242,13 @@ class FleetEnv:
     k_spawn, k_yaw, k_goal, k_state = jax.random.split(key, 4)
     num_spawns = p.spawns.shape[0]
     num_stations = p.nav.stations.shape[0]
-    xy = p.spawns[jax.random.choice(k_spawn, num_spawns, (k,), replace=False)]
+    z = self.config.robots_in_keepout
+    if z:
+      k_spawn, k_zone = jax.random.split(k_spawn)
+      xy = jnp.concatenate([p.zone_spawns[jax.random.choice(k_zone, p.zone_spawns.shape[0], (z,), replace=False)],
+                            p.spawns[jax.random.choice(k_spawn, num_spawns, (k - z,), replace=False)]])
+    else:
+      xy = p.spawns[jax.random.choice(k_spawn, num_spawns, (k,), replace=False)]
     yaw = jax.random.uniform(k_yaw, (k,), _F32, -jnp.pi, jnp.pi)
     qpos = jnp.concatenate([xy, yaw[:, None]], axis=1)
     data = jax.vmap(lambda q: self.data0.replace(qpos=q))(qpos)
@@ -244,14 +257,21 @@ class FleetEnv:
     local = Costmap(jnp.zeros((k, n, n), jnp.uint8), jnp.zeros((k, 2), _F32),
                     jnp.full((k,), p.map_resolution, _F32))
     false = jnp.zeros((k,), bool)
+    metrics = metrics_lib.Metrics.zeros(k, self.world.num_zones)
+    in_keepout = false
+    if self.keepout_escape:
+      in_keepout = jax.vmap(lambda q: metrics_lib.in_keepout(p.keepout, q))(xy)
+      now = self._footprint_in_keepout(xy)
+      metrics = dataclasses.replace(metrics, started_in_keepout=now, footprint_now=now,
+                                    footprint_last_time=jnp.where(now, 0.0, -1.0).astype(_F32))
     return WorldState(
         data=data, cmd=jnp.zeros((k, 2), _F32), goal=goal, speed=SpeedState.create(k),
         speed_cap=jnp.full((k,), jnp.inf, _F32), keepout=KeepoutState.create(k), local=local,
         local_hard=jnp.ones((k, n, n), jnp.uint8),
         progress_anchor=xy, progress_time=jnp.zeros((k,), _F32), blocked_time=jnp.zeros((k,), _F32),
-        recovery_time=jnp.zeros((k,), _F32), in_keepout=false,
+        recovery_time=jnp.zeros((k,), _F32), in_keepout=in_keepout,
         in_contact=false, in_near=false,
-        metrics=metrics_lib.Metrics.zeros(k, self.world.num_zones), key=k_state,
+        metrics=metrics, key=k_state,
         time=jnp.zeros((), _F32))
 
   # ------------------------------------------------------------------ step
@@ -278,11 +298,12 @@ class FleetEnv:
       local, kstate = local_costmap.local_costmaps(
           p.static_cost, p.map_origin, p.map_resolution, self.world.pad, p.keepout, poses,
           state.keepout, n=self.world.window_cells, robot_radius=cfg.robot.radius,
-          inflation=self.world.inflation)
+          inflation=self.world.inflation, keepout_config=self.world.keepout_config)
       state = dataclasses.replace(state, local=local, keepout=kstate,
                                   local_hard=jax.vmap(planner.hard_cells)(local.cost))
-      state, _ = jax.lax.scan(lambda s, _: (self._tick(s), None), state, None,
-                              length=cfg.ticks_per_step)
+      t0 = state.time
+      state, _ = jax.lax.scan(lambda s, i: (self._tick(s, t0 + i.astype(_F32) * jnp.float32(cfg.control_dt)), None),
+                              state, jnp.arange(cfg.ticks_per_step))
       return dataclasses.replace(state, time=state.time + jnp.asarray(cfg.step_seconds, _F32))
 
   def _pick_goals(self, key, goal, xy):
@@ -300,8 +321,21 @@ class FleetEnv:
     logits = jnp.where(allowed, 0.0, -jnp.inf)
     return jax.vmap(jax.random.categorical)(jax.random.split(key, k), logits).astype(jnp.int32)
 
-  def _tick(self, s: WorldState) -> WorldState:
+  @property
+  def keepout_escape(self) -> bool:
+    """Whether keepout escape is on (FleetConfig.keepout_escape is not 'off')."""
+    return self.config.keepout_escape != "off"
+
+  def _footprint_in_keepout(self, xy: jax.Array) -> jax.Array:
+    """bool [K]: each robot's footprint (its disc) on a lethal keepout cell (jaxfilters.footprint's rule)."""
+    r = self.config.robot.radius
+    window = window_cells(None, r, 0.0, float(np.float32(self.world.scenario.keepout.resolution)))
+    return jax.vmap(lambda q: metrics_lib.footprint_in_keepout(self.params.keepout, q, radius=r,
+                                                               window=window))(xy)
+
+  def _tick(self, s: WorldState, t0=None) -> WorldState:
     cfg, p = self.config, self.params
+    t0 = s.time if t0 is None else t0
     r = cfg.robot
     k = self.num_robots
     dt = cfg.control_dt
@@ -334,8 +368,10 @@ class FleetEnv:
     # Local planner, then the hard clip to the limit in force.
     plan = functools.partial(planner.plan_one, nav=p.nav, speed_mask=p.speed, speed_cap=p.speed_cap,
                              config=cfg, extra_speeds=self.zone_speeds)
+    # In a zone (escape mode on): steer by the exit field, nav.dist[S], the shortest way out.
+    steer = jnp.where(s.keepout.is_pose_lethal, p.nav.stations.shape[0], goal) if self.keepout_escape else goal
     cmd, info = jax.vmap(plan, in_axes=(0, 0, 0, 0, 0, 0, 0, 0, 0, None, 0))(
-        poses, s.cmd, goal, cap, recovery > 0, s.local.cost, s.local_hard, s.local.origin,
+        poses, s.cmd, steer, cap, recovery > 0, s.local.cost, s.local_hard, s.local.origin,
         s.local.resolution, poses[:, :2], ~jnp.eye(k, dtype=bool))
     v = jnp.clip(cmd[:, 0], -cap, cap)
     w = cmd[:, 1]
@@ -346,7 +382,7 @@ class FleetEnv:
     m = dataclasses.replace(m, emergency_stops=m.emergency_stops + info["stopped"].astype(jnp.int32))
 
     # Physics.
-    def substep(carry, _):
+    def substep(carry, j):
       data, m, in_k = carry
       th = data.qpos[:, 2]
       ctrl = jnp.stack([v * jnp.cos(th), v * jnp.sin(th), w], axis=1)
@@ -358,10 +394,12 @@ class FleetEnv:
       kin = jax.vmap(lambda q: metrics_lib.in_keepout(p.keepout, q))(xy)
       m, in_k = metrics_lib.physics_update(m, in_k, xy, jnp.linalg.norm(xy - xy0, axis=-1), speed,
                                            zone, kin, cfg.physics_dt)
+      if self.keepout_escape:
+        t = t0 + (j + 1).astype(_F32) * jnp.float32(cfg.physics_dt)
+        m = metrics_lib.footprint_update(m, self._footprint_in_keepout(xy), t)
       return (data, m, in_k), None
 
-    (data, m, in_k), _ = jax.lax.scan(substep, (s.data, m, s.in_keepout), None,
-                                      length=cfg.substeps_per_tick)
+    (data, m, in_k), _ = jax.lax.scan(substep, (s.data, m, s.in_keepout), jnp.arange(cfg.substeps_per_tick))
     m, contact, near = metrics_lib.proximity_update(m, s.in_contact, s.in_near, data.qpos[:, :2],
                                                    r.radius, cfg.near_miss_margin)
     return dataclasses.replace(

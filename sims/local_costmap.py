@@ -13,18 +13,27 @@ For each robot of a world (Nav2's local costmap, `rolling_window: true`):
    map *after* inflation, Nav2's filter order, so keepout cells are lethal but
    not inflated.
 
+With a `keepout_config` (keepout escape, FleetConfig.keepout_escape) the
+keepout filter runs instead as a layer before inflation (Nav2 users list it
+under `plugins:` for that, docs PR #972): its updateBounds runs the escape
+mode's robot-in-zone test at each robot's pose, its process() writes the zones
+(`lethal_override_cost` while escaping, which inflation does not spread), and
+inflation then gives the zones an inscribed band.
+
 The work per robot is O(N^2 (R + K)) for an N x N window, independent of the
 map size, so a GPU can run tens of thousands of robots.
 """
 
 from __future__ import annotations
 
+import dataclasses
+
 import jax
 import jax.numpy as jnp
 
 from jaxfilters import constants
 from jaxfilters.inflation import InflationConfig, inflate
-from jaxfilters.keepout import KeepoutState, keepout_filter
+from jaxfilters.keepout import KeepoutConfig, KeepoutState, keepout_filter, keepout_update_bounds
 from jaxfilters.types import Costmap
 
 _F32 = jnp.float32
@@ -51,7 +60,8 @@ def window_index(xy: jax.Array, map_origin: jax.Array, res: jax.Array, n: int) -
 
 def local_costmaps(static_cost: jax.Array, map_origin: jax.Array, res: jax.Array, pad: int,
                    keepout, poses: jax.Array, keepout_state: KeepoutState, *, n: int,
-                   robot_radius: float, inflation: InflationConfig) -> tuple[Costmap, KeepoutState]:
+                   robot_radius: float, inflation: InflationConfig,
+                   keepout_config: KeepoutConfig | None = None) -> tuple[Costmap, KeepoutState]:
   """Builds the K local costmaps of one world.
 
   Args:
@@ -64,6 +74,8 @@ def local_costmaps(static_cost: jax.Array, map_origin: jax.Array, res: jax.Array
     n: window side in cells (static).
     robot_radius: m, radius of the other robots' footprints.
     inflation: static InflationConfig at resolution res.
+    keepout_config: static KeepoutConfig with escape mode: keepout as a layer
+      before inflation (see above); None: Nav2's filter after inflation.
 
   Returns:
     (Costmap with cost uint8 [K, n, n], origin [K, 2], resolution [K]; new KeepoutState).
@@ -83,6 +95,13 @@ def local_costmaps(static_cost: jax.Array, map_origin: jax.Array, res: jax.Array
   other = ~jnp.eye(k, dtype=bool)[:, :, None, None]
   occupied = jnp.any(other & (dx * dx + dy * dy <= robot_radius * robot_radius), axis=1)
   cost = jnp.where(occupied, jnp.uint8(constants.LETHAL_OBSTACLE), static)
-  cost = inflate(cost, config=inflation)
-  costmap = Costmap(cost, origin, jnp.full((k,), res, _F32))
-  return keepout_filter(costmap, keepout, poses, keepout_state)
+  if keepout_config is None:
+    cost = inflate(cost, config=inflation)
+    costmap = Costmap(cost, origin, jnp.full((k,), res, _F32))
+    return keepout_filter(costmap, keepout, poses, keepout_state)
+  primary = Costmap(cost, origin, jnp.full((k,), res, _F32))
+  bounds = jnp.concatenate([origin, origin + n * res], axis=1)     # the rolling window redraws it all
+  kstate, _ = keepout_update_bounds(primary, keepout, poses, keepout_state, bounds, config=keepout_config)
+  primary, kstate2 = keepout_filter(primary, keepout, poses, kstate, config=keepout_config)
+  kstate2 = dataclasses.replace(kstate2, error=kstate2.error | kstate.error)
+  return dataclasses.replace(primary, cost=inflate(primary.cost, config=inflation)), kstate2

@@ -7,7 +7,11 @@ Per robot (leading axis K inside one world, [W, K] over worlds):
   zone's limit in m/s plus `FleetConfig.speed_tolerance`), sampled every
   physics step at the robot centre's speed-mask cell;
 * keepout: physics steps with the robot centre on a lethal keepout-mask cell,
-  and entries into one (both must stay 0);
+  and entries into one (both must stay 0 for robots started outside zones);
+  with keepout escape (FleetConfig.keepout_escape) also over the footprint
+  (the robot's disc, jaxfilters.footprint's rule): steps, entries, the last
+  time it was on a zone, whether it is on one now, and which robots started
+  on one (they must leave; the entries count only comes-back and new ones);
 * robot-robot proximity at the controller rate: contacts (centres closer than
   2 * radius) and near misses (closer than 2 * radius + near_miss_margin),
   counted as events (rising edges) per robot, and the smallest separation;
@@ -27,6 +31,7 @@ import jax.numpy as jnp
 import numpy as np
 
 from jaxfilters import geometry
+from jaxfilters.footprint import footprint_in_zone_one
 from jaxfilters.keepout import pose_in_lethal_zone_one
 from jaxfilters.types import FilterMask, _dataclass
 
@@ -49,6 +54,14 @@ class Metrics:
     min_separation: float32 [K], smallest centre distance to another robot (m).
     stuck_events: int32 [K], progress-checker failures.
     emergency_stops: int32 [K], ticks with no admissible candidate.
+    footprint_steps: int32 [K], physics steps with the footprint on a lethal keepout cell.
+    footprint_entries: int32 [K], footprint entries into a zone (rising edges; a
+      robot started in one enters only by coming back).
+    footprint_last_time: float32 [K], simulated seconds when the footprint was last
+      on a zone (-1 never).
+    footprint_now: bool [K], the footprint is on a zone at the last physics step.
+    started_in_keepout: bool [K], the footprint was on a zone at reset.
+    (The footprint fields stay at their initial values without keepout escape.)
   """
   distance: jax.Array
   goals_reached: jax.Array
@@ -61,6 +74,11 @@ class Metrics:
   min_separation: jax.Array
   stuck_events: jax.Array
   emergency_stops: jax.Array
+  footprint_steps: jax.Array
+  footprint_entries: jax.Array
+  footprint_last_time: jax.Array
+  footprint_now: jax.Array
+  started_in_keepout: jax.Array
 
   @classmethod
   def zeros(cls, num_robots: int, num_zones: int) -> "Metrics":
@@ -80,7 +98,9 @@ class Metrics:
     return cls(distance=jnp.zeros((k,), _F32), goals_reached=i, zone_time=jnp.zeros((k, z), _F32),
                zone_max_speed=jnp.zeros((k, z), _F32), keepout_steps=i, keepout_entries=i,
                contacts=i, near_misses=i, min_separation=jnp.full((k,), jnp.inf, _F32),
-               stuck_events=i, emergency_stops=i)
+               stuck_events=i, emergency_stops=i, footprint_steps=i, footprint_entries=i,
+               footprint_last_time=jnp.full((k,), -1.0, _F32), footprint_now=jnp.zeros((k,), bool),
+               started_in_keepout=jnp.zeros((k,), bool))
 
 
 def zone_at(speed_mask: FilterMask, zone_table: jax.Array, xy: jax.Array) -> jax.Array:
@@ -114,6 +134,42 @@ def in_keepout(keepout_mask: FilterMask, xy: jax.Array) -> jax.Array:
   lo = None if keepout_mask.origin_lo is None else keepout_mask.origin_lo[0]
   return pose_in_lethal_zone_one(keepout_mask.data[0], keepout_mask.origin[0], keepout_mask.resolution[0], xy,
                                  lo)
+
+
+def footprint_in_keepout(keepout_mask: FilterMask, xy: jax.Array, *, radius: float, window: int) -> jax.Array:
+  """Whether a robot's footprint (a disc) covers a lethal keepout cell (jaxfilters.footprint's rule).
+
+  Args:
+    keepout_mask: FilterMask (M = 1) of the keepout filter.
+    xy: float32 [2] robot centre (m) in the mask frame.
+    radius: static, the robot radius (m).
+    window: static window half-size in mask cells (`jaxfilters.footprint.window_cells`
+      at the mask's resolution).
+
+  Returns:
+    bool []; cells off the mask never count.
+  """
+  lo = None if keepout_mask.origin_lo is None else keepout_mask.origin_lo[0]
+  return footprint_in_zone_one(keepout_mask.data[0], keepout_mask.origin[0], keepout_mask.resolution[0],
+                               jnp.stack([xy[0], xy[1], jnp.float32(0.0)]), radius=radius, window=window,
+                               mask_origin_lo=lo)
+
+
+def footprint_update(m: Metrics, now: jax.Array, t: jax.Array) -> Metrics:
+  """Accumulates one physics step of the footprint keepout metrics for K robots.
+
+  Args:
+    m: Metrics [K]; `m.footprint_now` holds the last step's flags.
+    now: bool [K] footprint on a zone at this step.
+    t: float32 [] simulated seconds at this step.
+
+  Returns:
+    The new Metrics.
+  """
+  return dataclasses.replace(
+      m, footprint_steps=m.footprint_steps + now.astype(jnp.int32),
+      footprint_entries=m.footprint_entries + (now & ~m.footprint_now).astype(jnp.int32),
+      footprint_last_time=jnp.where(now, t, m.footprint_last_time), footprint_now=now)
 
 
 def physics_update(m: Metrics, prev_in_keepout: jax.Array, xy: jax.Array, step_len: jax.Array,
@@ -170,7 +226,7 @@ def proximity_update(m: Metrics, prev_contact: jax.Array, prev_near: jax.Array, 
 
 
 def summarize(metrics: Metrics, *, zone_labels, zone_limits, zone_speed, speed_tolerance: float,
-              seconds: float) -> dict:
+              seconds: float, footprint: bool = False, escape_within: float | None = None) -> dict:
   """Host summary of final metrics.
 
   Args:
@@ -178,11 +234,18 @@ def summarize(metrics: Metrics, *, zone_labels, zone_limits, zone_speed, speed_t
     zone_labels, zone_limits, zone_speed: per zone (World fields).
     speed_tolerance: m/s allowed above a zone's limit (physics lag).
     seconds: simulated time.
+    footprint: the footprint keepout metrics were recorded (keepout escape);
+      False reports them as None.
+    escape_within: s, a robot started in a zone must be out (footprint clear)
+      by then and stay out; None: by the end of the run.
 
   Returns:
     A JSON-ready dict: 'fleet' totals and compliance per zone, and 'robots'
     (one dict per robot, world-major order). Contacts and near misses are
     robot-events (a pair coming into contact counts once for each robot).
+    `fleet['keepout_ok']`: no centre entry and no centre step for robots
+    started outside zones, and with footprint metrics no footprint entry and
+    every robot started in a zone escaped in time.
   """
   m = jax.tree.map(lambda a: np.asarray(a).reshape((-1,) + np.shape(a)[2:]), metrics)
   b = m.distance.shape[0]
@@ -214,6 +277,32 @@ def summarize(metrics: Metrics, *, zone_labels, zone_limits, zone_speed, speed_t
       "speed_compliant": all(zn["compliant"] for zn in zones),
       "zones": zones,
   }
+  started = m.started_in_keepout.astype(bool)
+  outside_steps = int(m.keepout_steps[~started].sum())
+  outside_entries = int(m.keepout_entries[~started].sum())
+  fleet["keepout_steps_started_outside"] = outside_steps
+  fleet["keepout_entries_started_outside"] = outside_entries
+  # A robot started in a zone may move its centre onto a zone cell while it escapes (its
+  # footprint is in the zone already); entering from outside shows as a footprint entry.
+  ok = outside_entries == 0 and outside_steps == 0
+  limit = seconds if escape_within is None else escape_within
+  escaped = started & ~m.footprint_now.astype(bool) & (m.footprint_last_time <= limit)
+  if footprint:
+    fleet.update({
+        "keepout_metric": "footprint (robot disc) and centre",
+        "footprint_steps": int(m.footprint_steps.sum()),
+        "footprint_entries": int(m.footprint_entries.sum()),
+        "robots_started_in_keepout": int(started.sum()),
+        "robots_escaped": int(escaped.sum()),
+        "escape_within_s": float(limit),
+        "escape_time_max_s": float(m.footprint_last_time[escaped].max()) if escaped.any() else None,
+        "robots_in_keepout_at_end": int(m.footprint_now.astype(bool).sum()),
+    })
+    ok = ok and fleet["footprint_entries"] == 0 and bool(np.all(escaped[started]))
+  else:
+    fleet.update({"keepout_metric": "centre", "footprint_steps": None, "footprint_entries": None,
+                  "robots_started_in_keepout": int(started.sum())})
+  fleet["keepout_ok"] = bool(ok)
   robots = []
   for i in range(b):
     robots.append({
@@ -228,5 +317,8 @@ def summarize(metrics: Metrics, *, zone_labels, zone_limits, zone_speed, speed_t
         "min_separation_m": float(m.min_separation[i]) if np.isfinite(m.min_separation[i]) else None,
         "stuck_events": int(m.stuck_events[i]),
         "emergency_stops": int(m.emergency_stops[i]),
+        "started_in_keepout": bool(started[i]),
+        "footprint_entries": int(m.footprint_entries[i]) if footprint else None,
+        "escape_time_s": float(m.footprint_last_time[i]) if footprint and escaped[i] else None,
     })
   return {"fleet": fleet, "robots": robots}

@@ -40,7 +40,9 @@ class NavField:
 
   Attributes:
     dist: float32 [S, Hn, Wn], metres (weighted) to station s; +inf if blocked or
-      unreachable.
+      unreachable. With keepout escape (FleetConfig.keepout_escape) one more
+      entry, dist[S], is the exit field (`exit_field`): metres to the nearest
+      cell outside the keepout zones and their inscribed band.
     origin: float32 [2], world (x, y) of the lower-left corner of cell (0, 0).
     resolution: float32 [], metres per navigation cell.
     stations: float32 [S, 2], world (x, y) of each station (a cell centre).
@@ -52,8 +54,8 @@ class NavField:
 
   @property
   def num_stations(self) -> int:
-    """S, the number of goal stations (fields)."""
-    return self.dist.shape[0]
+    """S, the number of goal stations."""
+    return self.stations.shape[0]
 
 
 def pool_costmap(cost: np.ndarray, factor: int, *, cost_weight: float = 2.0
@@ -139,6 +141,31 @@ def distance_field(weight: jax.Array, goal_rows: jax.Array, goal_cols: jax.Array
   s = goal_rows.shape[0]
   d = jnp.full((h, s, w), jnp.inf, _F32)
   d = d.at[goal_rows, jnp.arange(s), goal_cols].set(0.0)
+  return _solve(d, weight, max_passes)
+
+
+@functools.partial(jax.jit, static_argnames=("max_passes",))
+def exit_field(weight: jax.Array, sources: jax.Array, *, max_passes: int = 200) -> jax.Array:
+  """Weighted 8-connected distance from every cell to the nearest source cell (one multi-source field).
+
+  The keepout escape's "shortest way out": sources are the cells outside the
+  keepout zones and their inscribed band, and the weights let a path cross
+  zones (not walls), so descending the field leaves a zone the shortest way.
+
+  Args:
+    weight: float32 [Hn, Wn], metres per unit step through a cell (+inf = blocked).
+    sources: bool [Hn, Wn], cells at distance 0 (blocked ones are ignored).
+    max_passes: cap on rounds of four sweeps.
+
+  Returns:
+    float32 [1, Hn, Wn]: metres; +inf where blocked or no source is reachable.
+  """
+  d = jnp.where(sources & jnp.isfinite(weight), 0.0, jnp.inf).astype(_F32)[:, None, :]
+  return _solve(d, weight, max_passes)
+
+
+def _solve(d: jax.Array, weight: jax.Array, max_passes: int) -> jax.Array:
+  """Fast sweeping from the initial distances d [H, S, W] to convergence; returns [S, H, W]."""
   wt = weight.T
 
   def cond(carry):

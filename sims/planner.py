@@ -10,7 +10,8 @@ within the acceleration limits (a unicycle, `rollout_dt` steps over
   keepout cells written by the keepout filter) or unknown (255) cell of the
   robot's local costmap, or on an inscribed (253) cell unless the robot
   already stands on one (so it can always back out of another robot's
-  inflation);
+  inflation; `PlannerConfig.inscribed_is_collision` drops that exception, as
+  Nav2's controllers do for a circular robot);
 * it brings the robot closer than 2 * radius + monitor_margin to another
   robot's current position (a collision monitor in the spirit of Nav2's
   FootprintApproach; moving away is always allowed).
@@ -265,7 +266,9 @@ def evaluate(pose, cmd, goal, limit_now, recovering, cost, hard, origin, res, ot
   hard_pts = local_cost_at(hard, origin, res, pts)               # 255 outside the window
   c_here = local_cost_at(cost, origin, res, pose[:2])
   hard_here = local_cost_at(hard, origin, res, pose[:2]) > 0
-  escape = c_here >= constants.INSCRIBED_INFLATED_OBSTACLE
+  # A robot on an inscribed cell may cross them to get off (another robot's inflation), unless
+  # the config follows Nav2's controllers, for which the centre on 253 is a collision.
+  escape = (c_here >= constants.INSCRIBED_INFLATED_OBSTACLE) & (not p.inscribed_is_collision)
   blocked = ((c_pts >= constants.LETHAL_OBSTACLE) | ((hard_pts > 0) & ~hard_here)
              | ((c_pts == constants.INSCRIBED_INFLATED_OBSTACLE) & ~escape))
   collide = jnp.any(blocked, axis=1)

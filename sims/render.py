@@ -258,7 +258,13 @@ def _result_line(summary: dict | None) -> str:
   f = summary["fleet"] if "fleet" in summary else summary
   speed_ok = "PASS" if f["speed_compliant"] else "FAIL"
   keep_ok = f["keepout_entries"] == 0 and f.get("keepout_steps", 0) == 0
-  return (f"speed compliance {speed_ok}  |  keepout entries {f['keepout_entries']} "
+  if f.get("footprint_entries") is not None:
+    keep_ok = bool(f["keepout_ok"])
+    keep = (f"footprint entries {f['footprint_entries']}, escaped {f['robots_escaped']}/"
+            f"{f['robots_started_in_keepout']}")
+  else:
+    keep = f"keepout entries {f['keepout_entries']}"
+  return (f"speed compliance {speed_ok}  |  {keep} "
           f"({'PASS' if keep_ok else 'FAIL'})  |  goals reached {f['goals_reached']}")
 
 

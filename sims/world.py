@@ -12,7 +12,12 @@
    spread by farthest-point sampling) and spawn points (free cells, >= 0.8 m apart);
 4. the navigation field of every station (`navigation.distance_field`);
 5. a speed-zone table: zone 0 is "no limit" (mask value 0, off-mask or
-   unknown), zones 1..Z-1 are the distinct limits of the speed mask.
+   unknown), zones 1..Z-1 are the distinct limits of the speed mask;
+6. with keepout escape (`FleetConfig.keepout_escape`): the local keepout
+   config (`keepout_config`), the exit field (`navigation.exit_field`, the
+   shortest way out of every zone, crossing zones but not walls) and, for
+   `robots_in_keepout`, spawn points whose footprint is on a lethal keepout
+   cell (`zone_spawns`).
 
 The device part, `WorldParams`, is one pytree shared (not batched) by every
 world and robot; nothing in it is per robot, so its size does not grow with B.
@@ -22,14 +27,16 @@ from __future__ import annotations
 
 import dataclasses
 import functools
+import math
 
 import jax
 import jax.numpy as jnp
 import numpy as np
 
 from jaxfilters import constants
+from jaxfilters.footprint import band_clearance, footprint_in_zone_one, window_cells
 from jaxfilters.inflation import InflationConfig, inflate
-from jaxfilters.keepout import KeepoutState, keepout_filter
+from jaxfilters.keepout import KeepoutConfig, KeepoutState, keepout_filter
 from jaxfilters.static_layer import StaticLayerConfig, static_layer
 from jaxfilters.types import Costmap, FilterInfo, FilterMask, _dataclass
 from sims import navigation
@@ -60,8 +67,11 @@ class WorldParams:
       returns at the cell (Nav2's rule, converted to m/s once); the one-cell
       dilation makes the planner's sampled lookahead conservative, so a rollout
       sampled every half cell cannot clip a zone corner between two samples.
-    nav: NavField with S stations.
+    nav: NavField with S stations (and the exit field as dist[S] with keepout escape).
     spawns: float32 [P, 2], spawn points.
+    zone_spawns: float32 [Q, 2], spawn points whose footprint (a disc of the
+      robot radius) covers a lethal keepout cell, clear of the walls'
+      inscribed band, with a way out (Q = 0 unless robots_in_keepout > 0).
   """
   static_cost: jax.Array
   map_origin: jax.Array
@@ -73,6 +83,7 @@ class WorldParams:
   speed_cap: jax.Array
   nav: navigation.NavField
   spawns: jax.Array
+  zone_spawns: jax.Array
 
 
 @dataclasses.dataclass(frozen=True, eq=False)
@@ -91,6 +102,9 @@ class World:
     zone_limits: raw limit per zone (percent or m/s; 0.0 for zone 0).
     zone_speed: m/s per zone (inf for zone 0).
     stations: float [S, 2]; spawns: float [P, 2].
+    keepout_config: the local costmaps' KeepoutConfig with keepout escape
+      (None: the filter after inflation, as Nav2 places filters).
+    zone_spawns: float [Q, 2] (see WorldParams).
   """
   scenario: Scenario
   config: FleetConfig
@@ -105,6 +119,8 @@ class World:
   zone_speed: tuple[float, ...]
   stations: np.ndarray
   spawns: np.ndarray
+  keepout_config: KeepoutConfig | None = None
+  zone_spawns: np.ndarray = dataclasses.field(default_factory=lambda: np.zeros((0, 2), np.float32))
 
   @property
   def num_zones(self) -> int:
@@ -112,8 +128,25 @@ class World:
     return len(self.zone_labels)
 
 
+def keepout_inscribed_radius(resolution: float, config: FleetConfig) -> float:
+  """The inscribed radius (m) at which a robot centre outside 253 cells keeps its footprint off zones.
+
+  The planner checks the cell under each rollout point (every max_speed * rollout_dt / 2
+  metres), so a point on a cell below 253 is farther than inscribed - resolution / sqrt 2
+  from every lethal cell centre, and the path between two points within a quarter of the
+  spacing more; 1 cm more covers tracking. Then the footprint disc (the robot radius)
+  covers no lethal cell centre: no footprint entry.
+  """
+  p, r = config.planner, config.robot
+  return r.radius + resolution * math.sqrt(0.5) + r.max_speed * p.rollout_dt / 4 + 0.01
+
+
 def inflation_config(resolution: float, config: FleetConfig) -> InflationConfig:
   """The InflationConfig of both costmaps: the robot's footprint and the fleet's inflation settings.
+
+  With keepout escape the inscribed radius is at least `keepout_inscribed_radius` (as Nav2's
+  `custom_inscribed_radius` would set it), so keepout zones run as a layer keep the
+  footprint, not just the centre, out.
 
   Args:
     resolution: metres per costmap cell.
@@ -122,34 +155,69 @@ def inflation_config(resolution: float, config: FleetConfig) -> InflationConfig:
   Returns:
     An InflationConfig for `jaxfilters.inflation.inflate`.
   """
-  return InflationConfig.from_footprint(
+  infl = InflationConfig.from_footprint(
       resolution=resolution, robot_radius=config.robot.radius,
       footprint_padding=config.robot.footprint_padding, inflation_radius=config.inflation_radius,
       cost_scaling_factor=config.cost_scaling_factor)
+  if config.keepout_escape == "off":
+    return infl
+  return dataclasses.replace(infl, inscribed_radius=max(infl.inscribed_radius,
+                                                        keepout_inscribed_radius(resolution, config)))
 
 
-@functools.partial(jax.jit, static_argnames=("infl",))
-def _global_costmap(data, origin, resolution, keepout: FilterMask, *, infl: InflationConfig):
+def local_keepout_config(resolution: float, config: FleetConfig, infl: InflationConfig) -> KeepoutConfig | None:
+  """The local costmaps' KeepoutConfig for `config.keepout_escape` (None for 'off').
+
+  'center' is Nav2's escape mode (`override_lethal_cost`, lethal_override_cost 252);
+  'footprint' adds the footprint test with the robot's disc and `band_clearance`, so escape
+  ends only once the robot's centre cell is outside the zone's inscribed band.
+  """
+  if config.keepout_escape == "off":
+    return None
+  if config.keepout_escape == "center":
+    return KeepoutConfig(override_lethal_cost=True)
+  r = config.robot.radius
+  return KeepoutConfig(override_lethal_cost=True, robot_in_zone="footprint", robot_radius=r,
+                       min_mask_resolution=resolution,
+                       escape_clearance=band_clearance(inscribed_radius=infl.inscribed_radius,
+                                                       resolution=resolution, robot_radius=r))
+
+
+@functools.partial(jax.jit, static_argnames=("infl", "with_keepout"))
+def _global_costmap(data, origin, resolution, keepout: FilterMask, *, infl: InflationConfig,
+                    with_keepout: bool = True):
   static = static_layer(data[None], config=STATIC_LAYER)
   cm = Costmap(static, origin[None], resolution[None])
-  cm, _ = keepout_filter(cm, keepout, jnp.zeros((1, 3), jnp.float32), KeepoutState.create(1))
+  if with_keepout:
+    cm, _ = keepout_filter(cm, keepout, jnp.zeros((1, 3), jnp.float32), KeepoutState.create(1))
   return inflate(cm.cost, config=infl)[0]
 
 
-def global_costmap(scenario: Scenario, keepout: FilterMask, infl: InflationConfig) -> np.ndarray:
+def global_costmap(scenario: Scenario, keepout: FilterMask, infl: InflationConfig, *,
+                   with_keepout: bool = True) -> np.ndarray:
   """Static layer, then the keepout filter as a plugin, then inflation.
 
   Args:
     scenario: the maps (the static map's grid is the costmap's).
     keepout: FilterMask (M = 1) of the keepout filter.
     infl: InflationConfig at the map resolution.
+    with_keepout: False leaves the keepout filter out (walls only: where a
+      robot may stand inside a zone).
 
   Returns:
     uint8 [H, W] global costmap (Nav2 cost values).
   """
   grid = scenario.map
   return np.asarray(_global_costmap(jnp.asarray(grid.data), jnp.asarray(np.float32(grid.origin[:2])),
-                                    jnp.asarray(np.float32(grid.resolution)), keepout, infl=infl))
+                                    jnp.asarray(np.float32(grid.resolution)), keepout, infl=infl,
+                                    with_keepout=with_keepout))
+
+
+@functools.partial(jax.jit, static_argnames=("radius", "window"))
+def _footprint_on_zone(data, origin, res, xy, origin_lo, *, radius: float, window: int):
+  one = lambda q: footprint_in_zone_one(data, origin, res, jnp.stack([q[0], q[1], jnp.float32(0.0)]),
+                                        radius=radius, window=window, mask_origin_lo=origin_lo)
+  return jax.lax.map(one, xy, batch_size=4096)
 
 
 def _zone_tables(scenario: Scenario, max_speed: float):
@@ -259,20 +327,38 @@ def build_world(scenario: Scenario, config: FleetConfig, *, seed: int = 0) -> Wo
   # free space but little of it clear of the whole inflation radius.
   reachable = np.isfinite(reach[best])
 
-  def pick(cells, chosen):
-    r, c = np.nonzero(cells)
-    pts = np.stack([ox + (c + 0.5) * nav_res, oy + (r + 0.5) * nav_res], axis=1)[rng.permutation(len(r))]
-    for p in pts:
+  def spaced(pts, chosen):
+    for p in pts[rng.permutation(len(pts))]:
       if len(chosen) >= MAX_SPAWNS:
         break
       if len(chosen) == 0 or np.min(np.sum((chosen - p) ** 2, axis=1)) >= SPAWN_SPACING ** 2:
         chosen = np.concatenate([chosen, p[None]])
     return chosen
 
-  chosen = pick(clear & reachable, np.empty((0, 2)))
-  if len(chosen) < config.robots_per_world:
+  def pick(cells, chosen):
+    r, c = np.nonzero(cells)
+    return spaced(np.stack([ox + (c + 0.5) * nav_res, oy + (r + 0.5) * nav_res], axis=1), chosen)
+
+  keepout_cfg = local_keepout_config(res, config, infl)
+  zone_spawns = np.zeros((0, 2), np.float32)
+  if keepout_cfg is not None:
+    # Exit field: through zones (walls only block), to the nearest cell of the main free region that
+    # is outside every zone and its inscribed band.
+    walls = global_costmap(scenario, keepout, infl, with_keepout=False)
+    wall_blocked, wall_weight = navigation.pool_costmap(walls, factor)
+    exit_weight = np.where(wall_blocked, np.inf, wall_weight * np.float32(nav_res)).astype(np.float32)
+    exit_dist = navigation.exit_field(jnp.asarray(exit_weight), jnp.asarray(~blocked & reachable))
+    dist = jnp.concatenate([dist, exit_dist])
+    if config.robots_in_keepout:
+      zone_spawns = _zone_spawns(grid, keepout, walls, np.asarray(exit_dist[0]), factor, config, spaced)
+      if len(zone_spawns) < config.robots_in_keepout:
+        raise ValueError(f"the keepout zones have room for {len(zone_spawns)} robots started in them (footprint "
+                         f"on a lethal cell, clear of walls, a way out, {SPAWN_SPACING} m apart); need "
+                         f"robots_in_keepout = {config.robots_in_keepout}")
+  chosen = pick(clear & reachable, zone_spawns.astype(np.float64))
+  if len(chosen) - len(zone_spawns) < config.robots_per_world:
     chosen = pick(~blocked & ~clear & reachable, chosen)
-  spawns = chosen.astype(np.float32)
+  spawns = chosen[len(zone_spawns):].astype(np.float32)       # >= SPAWN_SPACING from every zone spawn
   if len(spawns) < config.robots_per_world:
     raise ValueError(f"the map has room for {len(spawns)} robots per world (free cells clear of "
                      f"obstacles and keepout, {SPAWN_SPACING} m apart); need robots_per_world = "
@@ -295,7 +381,30 @@ def build_world(scenario: Scenario, config: FleetConfig, *, seed: int = 0) -> Wo
       nav=navigation.NavField(dist=dist, origin=jnp.asarray(np.float32([ox, oy])),
                               resolution=jnp.asarray(np.float32(nav_res)),
                               stations=jnp.asarray(stations)),
-      spawns=jnp.asarray(spawns))
+      spawns=jnp.asarray(spawns), zone_spawns=jnp.asarray(zone_spawns, jnp.float32).reshape(-1, 2))
   return World(scenario=scenario, config=config, params=params, global_cost=cost, inflation=infl,
                window_cells=n, pad=pad, nav_factor=factor, zone_labels=labels,
-               zone_limits=raw_limits, zone_speed=speeds, stations=stations, spawns=spawns)
+               zone_limits=raw_limits, zone_speed=speeds, stations=stations, spawns=spawns,
+               keepout_config=keepout_cfg, zone_spawns=np.asarray(zone_spawns, np.float32).reshape(-1, 2))
+
+
+def _zone_spawns(grid, keepout: FilterMask, walls: np.ndarray, exit_dist: np.ndarray, factor: int,
+                 config: FleetConfig, spaced) -> np.ndarray:
+  """Map cell centres where a robot's footprint covers a lethal keepout cell, spaced apart.
+
+  Candidates are clear of the walls' inscribed band (walls-only global cost < 253, so the
+  robot is not trapped by a wall) and have a finite exit field (a way out); the footprint
+  is the robot's disc, with the keepout footprint test (jaxfilters.footprint).
+  """
+  ox, oy = float(grid.origin[0]), float(grid.origin[1])
+  res = float(grid.resolution)
+  rows, cols = np.nonzero(walls < constants.INSCRIBED_INFLATED_OBSTACLE)
+  ok = np.isfinite(exit_dist[rows // factor, cols // factor])
+  rows, cols = rows[ok], cols[ok]
+  xy = np.stack([ox + (cols + 0.5) * res, oy + (rows + 0.5) * res], axis=1).astype(np.float32)
+  r = config.robot.radius
+  mres = float(keepout.resolution[0])
+  lo = None if keepout.origin_lo is None else keepout.origin_lo[0]
+  on = np.asarray(_footprint_on_zone(keepout.data[0], keepout.origin[0], keepout.resolution[0], jnp.asarray(xy),
+                                     lo, radius=r, window=window_cells(None, r, 0.0, mres)))
+  return spaced(xy[on].astype(np.float64), np.empty((0, 2))).astype(np.float32)

@@ -180,3 +180,64 @@ class ZoneRef:
     self.current = d
     self.initialized = True
     return True, False
+
+
+def _segment_distance(px, py, ax, ay, bx, by):
+  ex, ey = bx - ax, by - ay
+  len2 = ex * ex + ey * ey
+  u = 0.0 if len2 == 0 else min(1.0, max(0.0, ((px - ax) * ex + (py - ay) * ey) / len2))
+  return math.hypot(px - (ax + u * ex), py - (ay + u * ey))
+
+
+def footprint_signed_distance(qx, qy, *, polygon=None, radius=None):
+  """Signed distance (m) of a robot-frame point to the footprint: < 0 inside, 0 on the boundary.
+
+  Polygon: even-odd interior (ray to +x), distance to the nearest edge. Disc: |q| - r.
+  """
+  if radius is not None:
+    return math.hypot(qx, qy) - float(radius)
+  pts = [(float(a), float(b)) for a, b in polygon]
+  inside = False
+  dist = math.inf
+  for k, (ax, ay) in enumerate(pts):
+    bx, by = pts[(k + 1) % len(pts)]
+    if (ay > qy) != (by > qy) and qx < ax + (qy - ay) * (bx - ax) / (by - ay):
+      inside = not inside
+    dist = min(dist, _segment_distance(qx, qy, ax, ay, bx, by))
+  return -dist if (inside and dist > 0) else dist
+
+
+def footprint_in_zone(mask, mask_origin, mask_res, pose, *, polygon=None, radius=None, margin=0.0, eps=0.0):
+  """The footprint robot-in-zone rule (jaxfilters/footprint.py), over every mask cell, in float64.
+
+  A lethal cell (data 100, cost 253/254) counts when its centre, in the robot frame,
+  lies within `margin` of the footprint (signed distance <= margin). Centres within
+  `eps` of that boundary are undecided (float32 on the device).
+
+  Returns:
+    (surely, possibly): some lethal cell surely counts / possibly counts.
+  """
+  hm, wm = mask.shape
+  ox, oy, res = float(mask_origin[0]), float(mask_origin[1]), float(mask_res)
+  x, y, yaw = (float(v) for v in pose)
+  if not all(math.isfinite(v) for v in (x, y, yaw)):
+    return False, False
+  c, s = math.cos(yaw), math.sin(yaw)
+  surely = possibly = False
+  for my in range(hm):
+    for mx in range(wm):
+      if mask_cost(mask[my, mx]) not in (253, 254):
+        continue
+      dx, dy = ox + (mx + 0.5) * res - x, oy + (my + 0.5) * res - y
+      qx, qy = c * dx + s * dy, -s * dx + c * dy
+      sd = footprint_signed_distance(qx, qy, polygon=polygon, radius=radius)
+      surely |= sd <= margin - eps
+      possibly |= sd <= margin + eps
+  return surely, possibly
+
+
+def centre_in_zone(mask, mask_origin, mask_res, x, y):
+  """Nav2's robot-in-keepout test (spec §4.2): the centre's mask cell costs 253 or 254."""
+  hm, wm = mask.shape
+  cell = world_to_map(x, y, mask_origin[0], mask_origin[1], mask_res, wm, hm)
+  return cell is not None and mask_cost(mask[cell[1], cell[0]]) in (253, 254)
