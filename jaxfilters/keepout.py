@@ -1397,9 +1397,26 @@ def keepout_filter(costmap: Costmap, mask: FilterMask, poses, state: KeepoutStat
   idx, idx_ok, poses, enabled, window, transform = _batched_inputs(
       costmap, mask, poses, mask_index, enabled, window, transform, "keepout_filter")
   del poses
+  _check_index_range(costmap, mask)
   state = _fill_error(state, costmap.num_robots)
   return _keepout_filter_jit(costmap, mask, idx, idx_ok, state, window, enabled, transform,
                              config=_process_config(config))
+
+
+def _check_index_range(costmap: Costmap, mask: FilterMask) -> None:
+  """The kernels address the mask stack, padded by a costmap on each side, with int32 flat indices.
+
+  Raises:
+    ValueError: M (Hm + 2H) (Wm + 2W) >= 2^31, where an index would wrap and read
+      another cell (a static problem: the shapes alone decide it).
+  """
+  m, hm, wm = (int(n) for n in mask.data.shape)
+  h, w = (int(n) for n in costmap.cost.shape[1:])
+  cells = m * (hm + 2 * h) * (wm + 2 * w)
+  if cells >= 2 ** 31:
+    raise ValueError(f"keepout_filter: the mask stack [M, Hm, Wm] = [{m}, {hm}, {wm}] padded by the costmap "
+                     f"[{h}, {w}] on each side has {cells} cells; the keepout kernels index it with int32 and "
+                     f"take fewer than 2^31 (split the stack or crop the masks)")
 
 
 def _process_config(config: KeepoutConfig) -> KeepoutConfig:

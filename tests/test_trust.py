@@ -200,6 +200,22 @@ def test_keepout_refuses_a_costmap_that_is_not_uint8(dtype):
                       jf.KeepoutState.create(1))
 
 
+def test_keepout_refuses_a_mask_stack_its_int32_indices_would_wrap():
+  # M (Hm + 2H) (Wm + 2W) >= 2^31 used to wrap the flat int32 mask index and read
+  # another cell. The shapes decide it, so an abstract 2.1 GB stack is enough.
+  cm = jf.Costmap.create(np.zeros((1, 8, 8), np.uint8), (0.0, 0.0), 1.0)
+  small = _keepout_mask(np.full((3, 3), 100))
+  args = (np.zeros((1, 3), np.float32), jf.KeepoutState.create(1))
+
+  def run(data):
+    return jf.keepout_filter(cm, dataclasses.replace(small, data=data), *args)[0].cost
+  big = jax.ShapeDtypeStruct((1, 46_000, 46_700), jnp.int8)   # (46016 * 46716) > 2^31
+  with pytest.raises(ValueError, match="int32 and take fewer than 2\\^31"):
+    jax.eval_shape(run, big)
+  ok = jax.ShapeDtypeStruct((1, 46_000, 46_000), jnp.int8)     # 46016^2 < 2^31
+  assert jax.eval_shape(run, ok).shape == (1, 8, 8)
+
+
 @pytest.mark.parametrize("res", [1e-50, 1e39, 0.0, -1.0, float("inf")])
 def test_costmap_refuses_resolutions_the_device_cannot_hold(res):
   with pytest.raises(ValueError, match="resolution"):
