@@ -108,7 +108,7 @@ def _summary(compiled) -> dict:
   text = compiled.as_text()
   entry = text[text.index("ENTRY"):]
   entry = entry[:entry.index("\n}")]
-  count = lambda s, op: len(re.findall(rf"= [^=]*\b{op}\(", s))
+  count = lambda s, op: len(re.findall(rf"[\s)]{op}\(", s))    # an instruction's opcode
   return dict(fusions=count(text, "fusion"), whiles=count(text, "while"), entry_whiles=count(entry, "while"),
               conditionals=count(text, "conditional"), custom_calls=count(text, "custom-call"),
               entry_kernels=count(entry, "fusion") + count(entry, "custom-call"))
@@ -140,11 +140,13 @@ def _agree(fleet) -> dict:
   box, run, sx, sy, sl = jax.jit(ko._same_frame_prologue)(cm, mask, idx, ok, win, en)
   h, w = cm.cost.shape[1:]
   flags = jax.vmap(lambda x0, y0, x1, y1: ko._window_flags(w, h, x0, y0, x1, y1, True))(*box)
-  writes = jnp.any(col_ok, 1) & jnp.any(row_ok, 1)
+  writes = jnp.any(col_ok, 1) & jnp.any(row_ok, 1)      # a robot that writes nothing has no window to compare
+  new_writes = jnp.any(flags[0], 1) & jnp.any(flags[1], 1)
+  same_window = ~writes | (jnp.all(flags[0] == col_ok, 1) & jnp.all(flags[1] == row_ok, 1))
   both = sl & sl_o & writes
   return dict(robots=int(cm.num_robots), sliced_old=int(jnp.sum(sl_o)), sliced_new=int(jnp.sum(sl)),
               sliced_old_not_new=int(jnp.sum(sl_o & ~sl & writes)),
-              same_flags=bool(jnp.array_equal(flags[0], col_ok) and jnp.array_equal(flags[1], row_ok)),
+              same_writers=bool(jnp.array_equal(writes, new_writes)), same_windows=bool(jnp.all(same_window)),
               same_run=bool(jnp.array_equal(run, run_o)),
               same_starts_where_both_slice_and_write=bool(jnp.all(~both | ((sx == sx_o) & (sy == sy_o)))))
 

@@ -738,19 +738,21 @@ def _tree_where(pick, a, b):
   return jax.tree.map(lambda x, y: jnp.where(pick.reshape(pick.shape + (1,) * (x.ndim - 1)), x, y), a, b)
 
 
-def _if_any(need, fix, fast):
-  """`fast` with the robots where `need` (bool [B]) replaced by `fix()`'s, computed for the whole
-  batch only when some robot needs it: one batch-level branch, no loop, nothing run otherwise."""
-  return jax.lax.cond(jnp.any(need), lambda f: _tree_where(need, fix(), f), lambda f: f, fast)
+def _rerun_if_any(need, fast, exact_fn, args, capacity):
+  """`_rerun` inside one batch-level `lax.cond`: when no robot needs the exact arithmetic
+  (`need` bool [B] all False) nothing runs, not even a loop test (on a GPU each turn of a
+  loop whose trip count is data dependent waits for the host)."""
+  return jax.lax.cond(jnp.any(need), lambda f: _rerun(need, f, exact_fn, args, capacity), lambda f: f, fast)
 
 
 def _same_frame_prologue(costmap, mask, idx, idx_ok, window, enabled):
   """The same-frame fast path's per-robot scalars, for the whole fleet.
 
   The window clip is bracketed (`_same_frame_window_fast`) and the slice test too
-  (`_slice_test_one`); each runs exactly for the whole batch inside one `lax.cond`
-  only when some robot's bracket is open, so an aligned fleet runs a few fused
-  elementwise passes over [B] scalars and no loop.
+  (`_slice_test_one`); the robots whose bracket is open redo that part exactly
+  (`_rerun`, inside one batch-level `lax.cond` taken only when there are any), so a
+  fleet without such robots runs a few fused elementwise passes over [B] scalars and
+  no loop.
 
   Args:
     costmap, mask: as keepout_filter; idx int32 [B], idx_ok bool [B] (mask index in range),
@@ -770,18 +772,23 @@ def _same_frame_prologue(costmap, mask, idx, idx_ok, window, enabled):
     def one(origin, origin_lo, res, res_lo, i, extra):
       o, r = geometry.origin_terms(origin, origin_lo), geometry.resolution_terms(res, res_lo)
       return fn(o, r, _mask_origin(mask, i), mask.resolution[i], extra)
-    return lambda extra: jax.vmap(one, in_axes=(*geo_axes, 0, 0))(*geo, idx, extra)
+    return lambda args: jax.vmap(one, in_axes=(*geo_axes, 0, 0))(*args)
 
   box_of = lambda exact: batched(lambda o, r, mo, mr, win: _same_frame_box_one((hm, wm), o, r, mo, mr, win,
-                                                                               exact=exact))(window)
-  slice_of = lambda box, exact: batched(lambda o, r, mo, mr, bx: _slice_test_one((h, w), o, r, mo, mr, (hm, wm), bx,
-                                                                                  exact=exact))(box)
-  overlap, box, box_known = box_of(False)
-  overlap, box = _if_any(~box_known, lambda: box_of(True)[:2], (overlap, box))
+                                                                               exact=exact))
+  slice_of = lambda exact: batched(lambda o, r, mo, mr, bx: _slice_test_one((h, w), o, r, mo, mr, (hm, wm), bx,
+                                                                             exact=exact))
+  # Robots left open redo that part exactly, `capacity` at a time (few in practice: centres
+  # exactly on mask-cell edges, grids whose edges line up).
+  capacity = _rerun_capacity(b)
+  args = (*geo, idx, window)
+  overlap, box, box_known = box_of(False)(args)
+  overlap, box = _rerun_if_any(~box_known, (overlap, box), lambda a: box_of(True)(a)[:2], args, capacity)
   run = enabled & overlap & idx_ok
   box = tuple(jnp.where(run, c, 0) for c in box)      # a robot that does not run: an empty window
-  sx, sy, sliced, decided = slice_of(box, False)
-  sx, sy, sliced = _if_any(~decided, lambda: slice_of(box, True)[:3], (sx, sy, sliced))
+  args = (*geo, idx, box)
+  sx, sy, sliced, decided = slice_of(False)(args)
+  sx, sy, sliced = _rerun_if_any(~decided, (sx, sy, sliced), lambda a: slice_of(True)(a)[:3], args, capacity)
   return box, run, sx, sy, sliced
 
 
@@ -789,10 +796,9 @@ def _same_frame_batch(costmap, mask, idx, idx_ok, state, window, enabled, *, con
                       loop: str, packed: bool | None = None):
   """The fast same-frame keepout over a fleet: same integers as the exact path.
 
-  The prologue works on per-robot scalars: the window clip (bracketed; the exact clip for
-  the whole batch inside one `lax.cond` only when some robot's bracket is open), then the
-  slice test at the window's two end columns and rows (`_slice_test_one`; exact end
-  floors likewise). Only when some robot is not sliced are the [B, W] / [B, H] index
+  The prologue works on per-robot scalars (`_same_frame_prologue`): the window clip,
+  then the slice test at the window's two end columns and rows (`_slice_test_one`),
+  both bracketed, with exact reruns only for robots left open. Only when some robot is not sliced are the [B, W] / [B, H] index
   vectors built (bracketed, exact reruns for robots left open), inside that branch.
   Then `loop` "map" runs the cells one robot after another with `lax.map` (each robot's
   slice-or-gather choice a real branch, each slice contiguous: the CPU choice), "vmap"
@@ -829,8 +835,7 @@ def _same_frame_batch(costmap, mask, idx, idx_ok, state, window, enabled, *, con
       return _axis_cells((h, w), o, r, mo, mr, mshape)
     cells, known = per_robot(one)(*geo, idx)
     exact = lambda a: per_robot(functools.partial(one, exact=True))(*a)[0]
-    return jax.lax.cond(jnp.all(known), lambda c: c,
-                        lambda c: _rerun(~known, c, exact, (*geo, idx), _rerun_capacity(b)), cells)
+    return _rerun_if_any(~known, cells, exact, (*geo, idx), _rerun_capacity(b))
 
   def gather(c, i, mx, vx, my, vy, bx, st):
     return _gather_write_one(c, flat, i, mshape, mx, vx, my, vy, *flags(bx), st, config=config)

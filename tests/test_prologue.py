@@ -232,7 +232,7 @@ def _entry_ops(hlo: str, op: str) -> int:
   """How many `op` instructions the ENTRY computation of an HLO module runs directly."""
   entry = hlo[hlo.index("ENTRY"):]
   entry = entry[:entry.index("\n}")]
-  return len(re.findall(rf"= [^=]*\b{op}\(", entry))
+  return len(re.findall(rf"[\s)]{op}\(", entry))
 
 
 def test_aligned_path_runs_no_loop_unless_some_robot_needs_the_exact_arithmetic():
