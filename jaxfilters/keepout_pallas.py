@@ -60,7 +60,9 @@ class PallasTuning:
 
   Attributes:
     layout: "flat" (whole rows as one contiguous run, 16-byte vectors when the
-      row run is a multiple of 16 bytes) or "rows" (a [R, next_pow2(W)] block).
+      row run is a multiple of 16 bytes) or "rows" (a [R, next_pow2(W)] block, the
+      default: on an H100 at B = 16384, 200x200, "rows" 665 and "flat" 423-467
+      Gcell/s end to end, benchmarks/pallas_probe.py, 2026-11-22).
     block_cells: cells per program, a power of two in [16, 65536]: "flat" takes
       max(1, block_cells // W) rows, "rows" max(1, block_cells // next_pow2(W)).
     num_warps: warps per program (1, 2, 4, 8, 16 or 32).
@@ -76,7 +78,7 @@ class PallasTuning:
       slow; for tests on CPU). `KeepoutConfig(kernel="pallas")` on a backend
       other than GPU raises unless this is True.
   """
-  layout: str = "flat"
+  layout: str = "rows"
   block_cells: int = 2048
   num_warps: int = 4
   num_stages: int = 1

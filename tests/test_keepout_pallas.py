@@ -84,8 +84,8 @@ def _jitted_write(escape, lethal_cost, tuning):
   return jax.jit(functools.partial(kp.aligned_write, escape=escape, lethal_cost=lethal_cost, tuning=tuning))
 
 
-TUNINGS = [PallasTuning(interpret=True),                                         # flat, several rows per program
-           PallasTuning(block_cells=64, in_place=True, interpret=True),          # flat, one row (or part) per program
+TUNINGS = [PallasTuning(layout="flat", interpret=True),                           # flat, several rows per program
+           PallasTuning(layout="flat", block_cells=64, in_place=True, interpret=True),  # flat, one row (or part)
            PallasTuning(layout="rows", block_cells=256, interpret=True),
            PallasTuning(layout="rows", block_cells=2048, in_place=True, interpret=True)]
 
