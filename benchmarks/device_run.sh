@@ -4,7 +4,10 @@
 # measures every figure (filters, pipeline, fleet with filters and bare MJX, baselines,
 # the C++ peer, copy bandwidth) into $OUT/bench.json, soaks the fleet (SOAK=0 skips it),
 # and with RL=1 also runs benchmarks/rl_bench.py (needs the `rl` extra's wheels in .whl);
-# a summary table is printed last. Fits the device tool's 10-minute call with RL=0.
+# PROBES=1 adds the keepout probes (benchmarks/keepout_probe.py, pallas_probe.py,
+# prologue_probe.py) and the fleet breakdown (benchmarks/fleet_breakdown.py), each to
+# $OUT/*.json; TESTS=0 / BENCH=0 skip those parts. A summary table is printed last.
+# Fits the device tool's 10-minute call with RL=0 and PROBES=0.
 set -u
 OUT="${OUT:-/tmp/out}"
 mkdir -p "$OUT"
@@ -22,6 +25,7 @@ nvidia-smi -L || true
 echo "C++ peer compiler: $(command -v "${CXX:-g++}" || echo "none (the keepout figures say the peer was skipped)")"
 python3 -c 'import sys, jax, mujoco; print("python", sys.version.split()[0], "jax", jax.__version__, "mujoco", mujoco.__version__); print(jax.devices())'
 
+if [ "${TESTS:-1}" = 1 ]; then
 echo "== exact-arithmetic tests on the GPU (FMA contraction) -> $OUT/gpu_tests.log"
 # test_keepout_paths: the fast paths' error bounds (2-ulp division, FMA, flush-to-zero) on this device;
 # test_trust: the double-geometry and issue 7 cases.
@@ -29,10 +33,25 @@ timeout "${TEST_TIMEOUT:-300}" python3 -m pytest -q tests/test_geometry.py tests
   tests/test_keepout_paths.py tests/test_trust.py -k "not eager_speed_filter_compiles_once" \
   -p no:cacheprovider > "$OUT/gpu_tests.log" 2>&1
 echo "pytest rc=$? ; tail:"; tail -n 3 "$OUT/gpu_tests.log"
+fi
 
+if [ "${BENCH:-1}" = 1 ]; then
 echo "== benchmarks (full sizes) -> $OUT/bench.json"
 timeout "${BENCH_TIMEOUT:-330}" python3 -m benchmarks --json --out "$OUT/bench.json" > /dev/null 2> "$OUT/bench.stderr"
 echo "bench rc=$?"
+fi
+
+if [ "${PROBES:-0}" = 1 ]; then
+  echo "== keepout probes and the fleet breakdown -> $OUT/{keepout_probe,pallas_probe,prologue_probe,fleet_breakdown}.json"
+  timeout 200 python3 -m benchmarks.keepout_probe --budget-s 170 --out "$OUT/keepout_probe.json" > /dev/null 2> "$OUT/probes.stderr"
+  echo "keepout_probe rc=$?"
+  timeout 330 python3 benchmarks/pallas_probe.py --budget-s 280 --out "$OUT/pallas_probe.json" > /dev/null 2>> "$OUT/probes.stderr"
+  echo "pallas_probe rc=$?"
+  timeout 200 python3 benchmarks/prologue_probe.py --budget-s 150 --out "$OUT/prologue_probe.json" > /dev/null 2>> "$OUT/probes.stderr"
+  echo "prologue_probe rc=$?"
+  timeout "${BREAKDOWN_TIMEOUT:-300}" python3 benchmarks/fleet_breakdown.py 65536 > "$OUT/fleet_breakdown.json" 2>> "$OUT/probes.stderr"
+  echo "fleet_breakdown rc=$?"
+fi
 
 if [ "${SOAK:-1}" = 1 ]; then
   echo "== soak: fleet env steps in chunks (NaN, keepout, speed, device memory) -> $OUT/soak.log"
