@@ -149,10 +149,12 @@ def rollout_grid(pose: jax.Array, cmd: jax.Array, speeds: jax.Array, yaw_rates: 
 
   A candidate's speed profile depends only on its target speed and its heading
   only on its target yaw rate, so the ramps run once per speed (Nv) and the
-  heading rotations once per yaw rate (Nw); only the position update
-  x += (v dt) cos(heading) runs per candidate. Every value is computed by the
-  same float32 operations as `rollout` of `candidates` (tests/test_fleet_perf.py
-  checks it bit for bit on CPU).
+  heading rotations once per yaw rate (Nw), as [Nv, T] and [Nw, T] tables; each
+  candidate's points are then one cumulative sum over T of its steps
+  (v_t dt) (cos, sin)(midpoint heading_t), and its interval midpoints the points
+  less half a step. The ramps and headings are `rollout`'s float32 operations;
+  the positions differ from its step-by-step sums by float rounding (< 1e-5 m
+  over the horizon; tests/test_fleet_perf.py).
 
   Args:
     pose: float32 [3] (x, y, yaw).
@@ -173,23 +175,21 @@ def rollout_grid(pose: jax.Array, cmd: jax.Array, speeds: jax.Array, yaw_rates: 
   w = jnp.full((nw,), cmd[1])
   hc = jnp.full((nw,), jnp.cos(pose[2]))
   hs = jnp.full((nw,), jnp.sin(pose[2]))
-  x = jnp.full((nv, nw), pose[0])
-  y = jnp.full((nv, nw), pose[1])
-  vs, xs, ys, mxs, mys = [v], [], [], [], []
+  vs, mcs, mss = [v], [], []
   for _ in range(p.num_rollout_steps):
     v = v + jnp.clip(speeds - v, -r.max_accel * dt, r.max_accel * dt)
     w = w + jnp.clip(yaw_rates - w, -r.max_yaw_accel * dt, r.max_yaw_accel * dt)
     ch, sh = _cos_sin_small(0.5 * w * dt)
     mc, ms = hc * ch - hs * sh, hs * ch + hc * sh          # midpoint heading [Nw]
-    vdt = v * dt                                           # [Nv]
-    x_new = x + vdt[:, None] * mc[None, :]
-    y_new = y + vdt[:, None] * ms[None, :]
-    mxs.append(0.5 * (x_new + x)), mys.append(0.5 * (y_new + y))
-    x, y = x_new, y_new
     hc, hs = mc * ch - ms * sh, ms * ch + mc * sh          # end-of-step heading
-    xs.append(x), ys.append(y), vs.append(v)
-  return {"x": jnp.stack(xs, -1), "y": jnp.stack(ys, -1), "mx": jnp.stack(mxs, -1),
-          "my": jnp.stack(mys, -1), "v": jnp.stack(vs, -1), "hc": hc, "hs": hs}
+    vs.append(v), mcs.append(mc), mss.append(ms)
+  v = jnp.stack(vs, -1)                                    # [Nv, T+1]
+  vdt = v[:, 1:] * dt                                      # [Nv, T]
+  step_x = vdt[:, None, :] * jnp.stack(mcs, -1)[None, :, :]   # [Nv, Nw, T]
+  step_y = vdt[:, None, :] * jnp.stack(mss, -1)[None, :, :]
+  x = pose[0] + jnp.cumsum(step_x, axis=-1)
+  y = pose[1] + jnp.cumsum(step_y, axis=-1)
+  return {"x": x, "y": y, "mx": x - 0.5 * step_x, "my": y - 0.5 * step_y, "v": v, "hc": hc, "hs": hs}
 
 
 def local_cost_at(cost: jax.Array, origin: jax.Array, res: jax.Array, xy: jax.Array) -> jax.Array:
@@ -438,8 +438,7 @@ def evaluate_lut(pose, cmd, goal, limit_now, recovering, lut, origin, res, other
   with jax.named_scope("navigation"):
     end = jnp.stack([flat(x[..., -1]), flat(y[..., -1])], axis=1)             # [C, 2]
     start_val = navigation.nav_value(nav, goal, pose[:2])
-    end_val = jax.vmap(lambda q: navigation.nav_value(nav, goal, q))(end)
-    desired = jax.vmap(lambda q: navigation.descent_direction(nav, goal, q))(end)
+    end_val, desired = jax.vmap(lambda q: navigation.value_and_direction(nav, goal, q))(end)
   head = jnp.stack([jnp.broadcast_to(ro["hc"], (nv, nw)).reshape(c),
                     jnp.broadcast_to(ro["hs"], (nv, nw)).reshape(c)], axis=1)   # [C, 2]
 
@@ -517,13 +516,15 @@ def _monitor(pose, others, others_valid, x, y, config: FleetConfig):
   m = min(_MONITORED, others.shape[0])
   neg, near = jax.lax.top_k(-d2_now, m)
   sel = slice(1 - t % 2, t, 2)                                   # points 2 - T % 2, ..., T (ends at T)
-  dx = x[..., sel].reshape(c, -1)[:, :, None] - others[near, 0][None, None, :]   # [C, ~T/2, m]
-  dy = y[..., sel].reshape(c, -1)[:, :, None] - others[near, 1][None, None, :]
-  rel = jnp.stack([dx, dy], axis=-1)
-  d2_path = jnp.sum(rel * rel, axis=-1)
-  d2_min = jnp.min(d2_path, axis=1)                              # [C, m]
+  ox, oy = others[near, 0], others[near, 1]                       # [m]
+  # [m, Nv, Nw, ~T/2]: the points innermost, so the squares and the min run along contiguous memory.
+  dx = x[None, ..., sel] - ox[:, None, None, None]
+  dy = y[None, ..., sel] - oy[:, None, None, None]
+  d2_path = dx * dx + dy * dy
+  d2_min = jnp.min(d2_path, axis=-1).reshape(m, c).T             # [C, m]
+  d2_last = d2_path[..., -1].reshape(m, c).T
   approach = jnp.isfinite(neg)[None, :] & (d2_min < safe2) & (d2_min < -neg[None, :] - 1e-4)
-  return jnp.any(approach, axis=1), d2_path[:, -1], neg, rel_now[near]
+  return jnp.any(approach, axis=1), d2_last, neg, rel_now[near]
 
 
 def _speed_lookahead(speed_cap, speed_mask, pose, limit_now, x, y, mx, my, v, config: FleetConfig):

@@ -5,9 +5,11 @@ they were before the performance work. Here the current code runs on the same
 inputs (robots at random free poses of the built-in warehouse, several close
 together so the collision monitor and the robots layer matter, some inside or
 beside keepout zones and speed zones, random commands, goals, limits in force
-and recovery flags) and must give the same candidate scores, collisions,
-violations and chosen commands, bit for bit on this CPU; plus the parts on their
-own: the shared-work rollout, the packed lookup table and the argmin.
+and recovery flags) and must make the same decisions: the same collisions, clearance and
+violation terms and chosen commands, with the float terms within rounding (the
+rollout sums positions in another order; see `_assert_same_decisions`); plus
+the parts on their own: the shared-work rollout, the packed lookup table, the
+one-gather navigation stencil and the argmin.
 """
 
 from __future__ import annotations
@@ -21,7 +23,7 @@ import pytest
 
 from jaxfilters import constants
 from jaxfilters.keepout import KeepoutState
-from sims import local_costmap, planner
+from sims import local_costmap, navigation, planner
 from sims.config import FleetConfig, PlannerConfig
 from sims.env import FleetEnv
 from tests import planner_reference as ref
@@ -79,7 +81,7 @@ def _situations(env: FleetEnv, seed: int, clusters: int):
               cost=cm.cost, origin=cm.origin, res=cm.resolution)
 
 
-def _run_both(env: FleetEnv, s: dict, config: FleetConfig):
+def _run_both(env: FleetEnv, s: dict, config: FleetConfig, *, plans: bool = True):
   p = env.params
   extra = env.zone_speeds
   valid = ~jnp.eye(K, dtype=bool)
@@ -89,6 +91,8 @@ def _run_both(env: FleetEnv, s: dict, config: FleetConfig):
       lut = planner.lookup_table(cm)
       ev = planner.evaluate_lut(q, c, g, lim, rc, lut, o, rs, pose[:, :2], ok, p.nav, p.speed, p.speed_cap,
                                 config=config, extra_speeds=extra)
+      if not plans:
+        return ev, _plan_from(ev, c, config)
       out = planner.plan_lut_one(q, c, g, lim, rc, lut, o, rs, pose[:, :2], ok, p.nav, p.speed,
                                  p.speed_cap, config=config, extra_speeds=extra)
       return ev, out
@@ -97,6 +101,8 @@ def _run_both(env: FleetEnv, s: dict, config: FleetConfig):
       hard = ref.hard_cells(cm)
       ev = ref.evaluate(q, c, g, lim, rc, cm, hard, o, rs, pose[:, :2], ok, p.nav, p.speed, p.speed_cap,
                         config=config, extra_speeds=extra)
+      if not plans:
+        return ev, _plan_from(ev, c, config)
       out = ref.plan_one(q, c, g, lim, rc, cm, hard, o, rs, pose[:, :2], ok, p.nav, p.speed, p.speed_cap,
                          config=config, extra_speeds=extra)
       return ev, out
@@ -108,19 +114,66 @@ def _run_both(env: FleetEnv, s: dict, config: FleetConfig):
                                         s["cost"], s["origin"], s["res"])
 
 
-def _assert_same(new, old):
+def _plan_from(ev, cmd, config):
+  """plan_one's choice from an evaluate dict (the other grid's test compiles evaluate only)."""
+  best = jnp.argmin(ev["score"])
+  r, dt = config.robot, config.control_dt
+  target = ev["targets"][best]
+  new = jnp.stack([cmd[0] + jnp.clip(target[0] - cmd[0], -r.max_accel * dt, r.max_accel * dt),
+                   cmd[1] + jnp.clip(target[1] - cmd[1], -r.max_yaw_accel * dt, r.max_yaw_accel * dt)])
+  stopped = ev["collide"][best]
+  return (jnp.where(stopped, 0.0, new), {"stopped": stopped,
+                                        "speed_violation": jnp.where(stopped, 0.0, ev["violation"][best])})
+
+
+def _near_edge(xy, origin, res, tol=2e-5):
+  """bool [...]: a point of the candidate (rollout point or interval midpoint) within tol m of a cell edge."""
+  pts = np.concatenate([xy[..., 1:, :], 0.5 * (xy[..., 1:, :] + xy[..., :-1, :])], axis=-2)
+  u = (pts - origin[..., None, None, :]) / res[..., None, None, None]
+  frac = u - np.floor(u)
+  return np.any(np.minimum(frac, 1.0 - frac) * res[..., None, None, None] < tol, axis=(-1, -2))
+
+
+def _assert_same_decisions(new, old, s, env):
+  """The current planner against the reference: equal decisions, float terms within rounding.
+
+  Positions are summed in another order (rollout_grid), so points move by float
+  rounding (< 1e-5 m); a candidate with a point within 2e-5 m of a costmap or
+  speed-mask cell edge may read the neighbouring cell, so its discrete terms are
+  compared only when it has none. Commands must be equal wherever the reference's
+  best candidate wins by more than 1e-3 (nearly all robots).
+  """
   (ev, (cmd, info)), (ev_r, (cmd_r, info_r)) = jax.tree.map(np.asarray, (new, old))
-  for key in ("targets", "xy", "collide", "violation", "progress", "heading", "clearance", "score"):
-    np.testing.assert_array_equal(ev[key], ev_r[key], err_msg=key)
-  np.testing.assert_array_equal(cmd, cmd_r)
-  np.testing.assert_array_equal(info["stopped"], info_r["stopped"])
-  np.testing.assert_array_equal(info["speed_violation"], info_r["speed_violation"])
+  np.testing.assert_array_equal(ev["targets"], ev_r["targets"])
+  np.testing.assert_allclose(ev["xy"], ev_r["xy"], atol=2e-5)
+  res = np.asarray(s["res"], np.float64)
+  ambiguous = (_near_edge(ev_r["xy"], np.asarray(s["origin"], np.float64), res)
+               | _near_edge(ev_r["xy"], np.broadcast_to(np.asarray(env.params.speed.origin[0], np.float64),
+                                                        np.shape(s["origin"])),
+                            np.broadcast_to(np.asarray(env.params.speed.resolution[0], np.float64), res.shape)))
+  assert ambiguous.mean() < 0.5
+  clear = ~ambiguous
+  for key in ("collide", "clearance", "violation"):
+    np.testing.assert_array_equal(ev[key][clear], ev_r[key][clear], err_msg=key)
+  np.testing.assert_allclose(ev["progress"], ev_r["progress"], atol=1e-4)
+  np.testing.assert_allclose(ev["heading"], ev_r["heading"], atol=2e-3)
+  free = ~ev["collide"] & ~ev_r["collide"]
+  np.testing.assert_allclose(ev["score"][free], ev_r["score"][free], rtol=1e-5, atol=1e-3)
+  top2 = np.sort(ev_r["score"], axis=-1)[..., :2]
+  same_terms = np.all((ev["collide"] == ev_r["collide"]) & (ev["clearance"] == ev_r["clearance"])
+                      & (ev["violation"] == ev_r["violation"]), axis=-1)
+  stopped_both = np.all(ev_r["collide"], axis=-1)       # every candidate blocked: the command is 0 anyway
+  decided = ((top2[..., 1] - top2[..., 0] > 1e-3) | stopped_both) & same_terms
+  assert decided.mean() > 0.8, (decided.mean(), (top2[..., 1] - top2[..., 0]).ravel())
+  np.testing.assert_array_equal(cmd[decided], cmd_r[decided])
+  np.testing.assert_array_equal(info["stopped"][decided], info_r["stopped"][decided])
+  np.testing.assert_allclose(info["speed_violation"][decided], info_r["speed_violation"][decided], atol=1e-6)
 
 
-def test_planner_matches_reference_bit_for_bit(env):
+def test_planner_matches_reference(env):
   s = _situations(env, seed=0, clusters=12)
   new, old = _run_both(env, s, env.config)
-  _assert_same(new, old)
+  _assert_same_decisions(new, old, s, env)
   # The cases are not trivial: some candidates collide, some robots stop, some violate, all rules fire.
   ev, (cmd, info) = jax.tree.map(np.asarray, new)
   assert ev["collide"].any() and not ev["collide"].all()
@@ -135,8 +188,8 @@ def test_planner_matches_reference_other_grids(env):
   cfg = dataclasses.replace(env.config, planner=PlannerConfig(num_speeds=4, num_yaw_rates=6, horizon=1.2))
   assert cfg.planner.num_rollout_steps == 12
   s = _situations(env, seed=1, clusters=6)
-  new, old = _run_both(env, s, cfg)
-  _assert_same(new, old)
+  new, old = _run_both(env, s, cfg, plans=False)
+  _assert_same_decisions(new, old, s, env)
 
 
 def test_rollout_grid_equals_rollout():
@@ -150,12 +203,14 @@ def test_rollout_grid_equals_rollout():
     xy, head, v = jax.jit(planner.rollout, static_argnums=3)(pose, cmd, jnp.asarray(targets), cfg)
     g = jax.jit(planner.rollout_grid, static_argnums=4)(pose, cmd, jnp.asarray(speeds), jnp.asarray(rates), cfg)
     nv, nw = len(speeds), len(rates)
-    np.testing.assert_array_equal(np.asarray(g["x"]).reshape(nv * nw, -1), np.asarray(xy[:, 1:, 0]))
-    np.testing.assert_array_equal(np.asarray(g["y"]).reshape(nv * nw, -1), np.asarray(xy[:, 1:, 1]))
+    np.testing.assert_allclose(np.asarray(g["x"]).reshape(nv * nw, -1), np.asarray(xy[:, 1:, 0]), atol=1e-5)
+    np.testing.assert_allclose(np.asarray(g["y"]).reshape(nv * nw, -1), np.asarray(xy[:, 1:, 1]), atol=1e-5)
     mids = 0.5 * (xy[:, 1:] + xy[:, :-1])
-    np.testing.assert_array_equal(np.asarray(g["mx"]).reshape(nv * nw, -1), np.asarray(mids[..., 0]))
+    np.testing.assert_allclose(np.asarray(g["mx"]).reshape(nv * nw, -1), np.asarray(mids[..., 0]), atol=1e-5)
+    np.testing.assert_allclose(np.asarray(g["my"]).reshape(nv * nw, -1), np.asarray(mids[..., 1]), atol=1e-5)
     np.testing.assert_array_equal(np.asarray(g["v"]), np.asarray(v).reshape(nv, nw, -1)[:, 0])
     np.testing.assert_array_equal(np.tile(np.asarray(g["hc"]), nv), np.asarray(head[:, 0]))
+    np.testing.assert_array_equal(np.tile(np.asarray(g["hs"]), nv), np.asarray(head[:, 1]))
     np.testing.assert_array_equal(targets, ref.candidates(cfg, (0.2475, 0.1485)))
 
 
@@ -193,6 +248,22 @@ def test_lut_at_and_speed_cap_xy_match_the_2d_lookups():
   cap = jnp.asarray(rng.uniform(0.1, 0.5, (20, 25)), jnp.float32).at[3, 4].set(jnp.inf)
   np.testing.assert_array_equal(np.asarray(planner.speed_cap_xy(cap, origin, res, pts[:, 0], pts[:, 1])),
                                 np.asarray(ref.speed_cap_at(cap, origin, res, pts)))
+
+
+def test_value_and_direction_matches_nav_value_and_descent_direction(env):
+  """One gather for the five stencil points; the same values, directions within rounding."""
+  nav = env.params.nav
+  rng = np.random.default_rng(7)
+  lo = np.asarray(nav.origin) - 1.0
+  hi = np.asarray(nav.origin) + np.asarray(nav.dist.shape[:0:-1]) * float(nav.resolution) + 1.0
+  xy = jnp.asarray(rng.uniform(lo, hi, (3000, 2)), jnp.float32)        # some off the grid, some on walls
+  goal = jnp.asarray(rng.integers(0, nav.num_stations, 3000), jnp.int32)
+  val, d = jax.jit(jax.vmap(lambda g, q: navigation.value_and_direction(nav, g, q)))(goal, xy)
+  val_r = jax.vmap(lambda g, q: ref.nav_value(nav, g, q))(goal, xy)
+  d_r = jax.vmap(lambda g, q: ref.descent_direction(nav, g, q))(goal, xy)
+  np.testing.assert_allclose(np.asarray(val), np.asarray(val_r), rtol=1e-6)   # XLA may contract a*b+c (FMA)
+  np.testing.assert_allclose(np.asarray(d), np.asarray(d_r), atol=1e-4)
+  assert (np.asarray(val) == navigation.UNREACHABLE).any() and (np.asarray(val) < 50).any()
 
 
 @pytest.mark.parametrize("values", [
