@@ -20,6 +20,7 @@ is a difference of two measured figures:
 | candidates_3 / candidates_half / candidates_double | full with 3, about half or twice the planner's candidates |
 | const_costmap_lookups / const_speed_lookups / const_nav_lookups / const_lookups | full with the planner's local-costmap, speed-cap or navigation-field lookups (or all three) replaced by constants |
 | controller_10hz | full with the controller at 10 Hz (same costmap rate) |
+| rollout_cumsum / rollout_chain | full with the planner's rollout sums forced to one mode (`planner.rollout_grid`; the default is cumsum on CPU, chain elsewhere) |
 
 Each variant is compiled and timed in its own try block; a failure is reported
 as a string and the others still run. Progress goes to stderr; stdout gets one
@@ -166,6 +167,9 @@ _LOOKUPS = {
     "speed": [(planner, "speed_cap_at", _const_speed), (planner, "speed_cap_xy", _const_speed_xy)],
     "nav": [(navigation, "nav_value", _const_nav_value), (navigation, "descent_direction", _const_descent),
             (navigation, "value_and_direction", _const_value_and_direction)],
+    # Not lookups: the two ways sims/planner.py can sum the rollouts (its default depends on the backend).
+    "rollout_cumsum": [(planner, "_rollout_mode", lambda: "cumsum")],
+    "rollout_chain": [(planner, "_rollout_mode", lambda: "chain")],
 }
 
 
@@ -208,6 +212,8 @@ def variants(base: FleetConfig) -> dict:
       "const_nav_lookups": (base, {}, ("nav",)),
       "const_lookups": (base, {}, ("costmap", "speed", "nav")),
       "controller_10hz": (dataclasses.replace(base, controller_hz=10.0), {}, ()),
+      "rollout_cumsum": (base, {}, ("rollout_cumsum",)),
+      "rollout_chain": (base, {}, ("rollout_chain",)),
   }
 
 

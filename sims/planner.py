@@ -143,24 +143,37 @@ def _check_series(config: FleetConfig) -> None:
                      f"got {r.max_yaw_rate * dt}")
 
 
+def _rollout_mode() -> str:
+  """The default `rollout_grid` mode of this backend (see there)."""
+  return "cumsum" if jax.default_backend() == "cpu" else "chain"
+
+
 def rollout_grid(pose: jax.Array, cmd: jax.Array, speeds: jax.Array, yaw_rates: jax.Array,
-                 config: FleetConfig) -> dict:
+                 config: FleetConfig, *, mode: str | None = None) -> dict:
   """`rollout` of the candidate grid speeds x yaw_rates, sharing what candidates share.
 
   A candidate's speed profile depends only on its target speed and its heading
   only on its target yaw rate, so the ramps run once per speed (Nv) and the
   heading rotations once per yaw rate (Nw), as [Nv, T] and [Nw, T] tables; each
-  candidate's points are then one cumulative sum over T of its steps
-  (v_t dt) (cos, sin)(midpoint heading_t), and its interval midpoints the points
-  less half a step. The ramps and headings are `rollout`'s float32 operations;
-  the positions differ from its step-by-step sums by float rounding (< 1e-5 m
-  over the horizon; tests/test_fleet_perf.py).
+  candidate's points then add up its steps (v_t dt) (cos, sin)(midpoint heading_t),
+  and its interval midpoints are the points less half a step. The ramps and
+  headings are `rollout`'s float32 operations; the positions differ from its
+  step-by-step sums by float rounding (< 1e-5 m over the horizon;
+  tests/test_fleet_perf.py).
+
+  `mode` picks how the sums run: "cumsum" (one cumulative sum over T, the
+  points materialised behind an optimization barrier: XLA:CPU otherwise fuses
+  the chain into every consumer) or "chain" (T dependent adds and no barrier,
+  so a GPU can fuse the whole rollout into each lookup instead of writing and
+  re-reading [Nv, Nw, T] arrays per robot); None picks "cumsum" on CPU and
+  "chain" elsewhere. benchmarks/fleet_breakdown.py times both.
 
   Args:
     pose: float32 [3] (x, y, yaw).
     cmd: float32 [2] the last command (v, w).
     speeds: float32 [Nv] target speeds (m/s); yaw_rates: float32 [Nw] (rad/s).
     config: static FleetConfig.
+    mode: static "cumsum", "chain" or None (see above).
 
   Returns:
     dict of float32 arrays: 'x', 'y' [Nv, Nw, T] rollout points 1..T (m),
@@ -168,6 +181,9 @@ def rollout_grid(pose: jax.Array, cmd: jax.Array, speeds: jax.Array, yaw_rates: 
     (v[:, 0] = cmd[0]), 'hc', 'hs' [Nw] heading unit vector at the end.
   """
   _check_series(config)
+  mode = _rollout_mode() if mode is None else mode
+  if mode not in ("cumsum", "chain"):
+    raise ValueError(f"rollout_grid mode must be 'cumsum', 'chain' or None; got {mode!r}")
   p, r = config.planner, config.robot
   dt = p.rollout_dt
   nv, nw = speeds.shape[0], yaw_rates.shape[0]
@@ -187,9 +203,22 @@ def rollout_grid(pose: jax.Array, cmd: jax.Array, speeds: jax.Array, yaw_rates: 
   vdt = v[:, 1:] * dt                                      # [Nv, T]
   step_x = vdt[:, None, :] * jnp.stack(mcs, -1)[None, :, :]   # [Nv, Nw, T]
   step_y = vdt[:, None, :] * jnp.stack(mss, -1)[None, :, :]
-  x = pose[0] + jnp.cumsum(step_x, axis=-1)
-  y = pose[1] + jnp.cumsum(step_y, axis=-1)
-  return {"x": x, "y": y, "mx": x - 0.5 * step_x, "my": y - 0.5 * step_y, "v": v, "hc": hc, "hs": hs}
+  if mode == "cumsum":
+    x = pose[0] + jnp.cumsum(step_x, axis=-1)
+    y = pose[1] + jnp.cumsum(step_y, axis=-1)
+    out = {"x": x, "y": y, "mx": x - 0.5 * step_x, "my": y - 0.5 * step_y}
+    # Materialise the points once: without the barrier XLA:CPU may fuse (recompute) the
+    # sums into each of their consumers.
+    out = jax.lax.optimization_barrier(out)
+  else:
+    xs, ys = [], []
+    x, y = pose[0], pose[1]
+    for t in range(p.num_rollout_steps):
+      x, y = x + step_x[..., t], y + step_y[..., t]
+      xs.append(x), ys.append(y)
+    x, y = jnp.stack(xs, -1), jnp.stack(ys, -1)
+    out = {"x": x, "y": y, "mx": x - 0.5 * step_x, "my": y - 0.5 * step_y}
+  return {**out, "v": v, "hc": hc, "hs": hs}
 
 
 def local_cost_at(cost: jax.Array, origin: jax.Array, res: jax.Array, xy: jax.Array) -> jax.Array:
@@ -419,10 +448,7 @@ def evaluate_lut(pose, cmd, goal, limit_now, recovering, lut, origin, res, other
   c = nv * nw
   targets = jnp.asarray(candidates(config, extra_speeds))
   with jax.named_scope("rollout"):
-    # The barrier materialises the rollouts once: without it XLA:CPU may fuse (recompute) the
-    # whole T-step chain into each of its consumers below.
-    ro = jax.lax.optimization_barrier(
-        rollout_grid(pose, cmd, jnp.asarray(speeds_np), jnp.asarray(yaw_rates_np), config))
+    ro = rollout_grid(pose, cmd, jnp.asarray(speeds_np), jnp.asarray(yaw_rates_np), config)
   x, y, mx, my, v = ro["x"], ro["y"], ro["mx"], ro["my"], ro["v"]      # [Nv, Nw, T] x4, [Nv, T+1]
 
   def flat(a):  # [Nv, Nw, ...] -> [C, ...], candidate i * Nw + j

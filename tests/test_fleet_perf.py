@@ -192,7 +192,8 @@ def test_planner_matches_reference_other_grids(env):
   _assert_same_decisions(new, old, s, env)
 
 
-def test_rollout_grid_equals_rollout():
+@pytest.mark.parametrize("mode", ["cumsum", "chain"])
+def test_rollout_grid_equals_rollout(mode):
   cfg = FleetConfig()
   speeds, rates = planner.target_axes(cfg, (0.2475, 0.1485))
   targets = planner.candidates(cfg, (0.2475, 0.1485))
@@ -201,7 +202,8 @@ def test_rollout_grid_equals_rollout():
     pose = jnp.asarray(rng.uniform([-10, -10, -np.pi], [10, 10, np.pi]), jnp.float32)
     cmd = jnp.asarray(rng.uniform([-0.15, -1.5], [0.5, 1.5]), jnp.float32)
     xy, head, v = jax.jit(planner.rollout, static_argnums=3)(pose, cmd, jnp.asarray(targets), cfg)
-    g = jax.jit(planner.rollout_grid, static_argnums=4)(pose, cmd, jnp.asarray(speeds), jnp.asarray(rates), cfg)
+    g = jax.jit(planner.rollout_grid, static_argnums=4, static_argnames="mode")(
+        pose, cmd, jnp.asarray(speeds), jnp.asarray(rates), cfg, mode=mode)
     nv, nw = len(speeds), len(rates)
     np.testing.assert_allclose(np.asarray(g["x"]).reshape(nv * nw, -1), np.asarray(xy[:, 1:, 0]), atol=1e-5)
     np.testing.assert_allclose(np.asarray(g["y"]).reshape(nv * nw, -1), np.asarray(xy[:, 1:, 1]), atol=1e-5)
@@ -264,6 +266,12 @@ def test_value_and_direction_matches_nav_value_and_descent_direction(env):
   np.testing.assert_allclose(np.asarray(val), np.asarray(val_r), rtol=1e-6)   # XLA may contract a*b+c (FMA)
   np.testing.assert_allclose(np.asarray(d), np.asarray(d_r), atol=1e-4)
   assert (np.asarray(val) == navigation.UNREACHABLE).any() and (np.asarray(val) < 50).any()
+
+
+def test_rollout_grid_rejects_an_unknown_mode():
+  cfg = FleetConfig()
+  with pytest.raises(ValueError, match="'cumsum', 'chain' or None; got 'scan'"):
+    planner.rollout_grid(jnp.zeros(3), jnp.zeros(2), jnp.zeros(2), jnp.zeros(3), cfg, mode="scan")
 
 
 @pytest.mark.parametrize("values", [
