@@ -264,11 +264,25 @@ def speed_cap_xy(speed_cap: jax.Array, mask_origin: jax.Array, mask_res: jax.Arr
                  y: jax.Array) -> jax.Array:
   """`speed_cap_at` with the coordinates as two arrays of the same shape (x [...], y [...], m)."""
   h, w = speed_cap.shape
-  col = jnp.floor((x - mask_origin[0]) / mask_res).astype(jnp.int32)
-  row = jnp.floor((y - mask_origin[1]) / mask_res).astype(jnp.int32)
-  inside = (col >= 0) & (col < w) & (row >= 0) & (row < h)
-  flat = jnp.clip(row, 0, h - 1) * w + jnp.clip(col, 0, w - 1)
+  flat, inside = _flat_cell(x, y, mask_origin, 1.0 / mask_res, h, w)
   return jnp.where(inside, speed_cap.reshape(-1)[flat], jnp.inf)
+
+
+def _flat_cell(x: jax.Array, y: jax.Array, origin: jax.Array, inv_res: jax.Array, h: int, w: int):
+  """Row-major cell index of points on an h x w grid, and whether they are on it.
+
+  Multiplies by 1 / resolution (a division costs several multiplies on a GPU):
+  a point within float rounding of a cell edge may read the neighbouring cell,
+  as with a division. The range check is on the floats, so NaN and infinite
+  points are off the grid (XLA converts NaN to integer 0, a valid cell).
+
+  Returns:
+    (int32 [...] flat index, 0 off the grid; bool [...] on the grid).
+  """
+  u = jnp.floor((x - origin[0]) * inv_res)
+  v = jnp.floor((y - origin[1]) * inv_res)
+  inside = (u >= 0) & (u < w) & (v >= 0) & (v < h)
+  return jnp.where(inside, v.astype(jnp.int32) * w + u.astype(jnp.int32), 0), inside
 
 
 def hard_cells(cost: jax.Array) -> jax.Array:
@@ -335,10 +349,7 @@ def lut_at(lut: jax.Array, origin: jax.Array, res: jax.Array, x: jax.Array, y: j
     uint16 [...] codes.
   """
   n_rows, n_cols = lut.shape
-  col = jnp.floor((x - origin[0]) / res).astype(jnp.int32)
-  row = jnp.floor((y - origin[1]) / res).astype(jnp.int32)
-  inside = (col >= 0) & (col < n_cols) & (row >= 0) & (row < n_rows)
-  flat = jnp.clip(row, 0, n_rows - 1) * n_cols + jnp.clip(col, 0, n_cols - 1)
+  flat, inside = _flat_cell(x, y, origin, 1.0 / res, n_rows, n_cols)
   return jnp.where(inside, lut.reshape(-1)[flat], jnp.uint16(LUT_OUTSIDE))
 
 

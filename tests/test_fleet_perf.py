@@ -235,21 +235,28 @@ def test_lookup_table_codes():
 
 
 def test_lut_at_and_speed_cap_xy_match_the_2d_lookups():
+  """The flat lookups read the reference's cells (points within 1e-5 m of a cell edge may read either)."""
   rng = np.random.default_rng(5)
   cost = jnp.asarray(rng.integers(0, 256, (30, 30)).astype(np.uint8))
   origin, res = jnp.asarray([1.0, -2.0], jnp.float32), jnp.asarray(0.05, jnp.float32)
-  pts = jnp.asarray(rng.uniform([0.8, -2.2], [2.7, -0.3], (500, 2)), jnp.float32)      # some outside
+  pts = np.asarray(rng.uniform([0.8, -2.2], [2.7, -0.3], (2000, 2)), np.float32)      # some outside
+  u = (pts.astype(np.float64) - np.asarray(origin, np.float64)) / 0.05
+  pts = jnp.asarray(pts[np.all(np.abs(u - np.round(u)) * 0.05 > 1e-5, axis=1)])
   lut = planner.lookup_table(cost)
   got = np.asarray(planner.lut_at(lut, origin, res, pts[:, 0], pts[:, 1]))
   c = np.asarray(ref.local_cost_at(cost, origin, res, pts))
   h = np.asarray(ref.local_cost_at(ref.hard_cells(cost), origin, res, pts))
   np.testing.assert_array_equal(got & planner.LUT_LETHAL, (c >= 254).astype(int))
   np.testing.assert_array_equal((got & planner.LUT_HARD) > 0, h > 0)
+  np.testing.assert_array_equal((got & planner.LUT_INSCRIBED) > 0, c == 253)
   np.testing.assert_array_equal(got >> planner.LUT_CLEARANCE_SHIFT, np.where(c <= 252, c, 0))
-  assert ((c == 255) & (got == planner.LUT_OUTSIDE)).sum() > 0
+  off = np.any((np.asarray(pts) < np.asarray(origin)) | (np.asarray(pts) >= np.asarray(origin) + 1.5), axis=1)
+  assert off.sum() > 50 and np.all(got[off] == planner.LUT_OUTSIDE)
   cap = jnp.asarray(rng.uniform(0.1, 0.5, (20, 25)), jnp.float32).at[3, 4].set(jnp.inf)
   np.testing.assert_array_equal(np.asarray(planner.speed_cap_xy(cap, origin, res, pts[:, 0], pts[:, 1])),
                                 np.asarray(ref.speed_cap_at(cap, origin, res, pts)))
+  nan = planner.lut_at(lut, origin, res, jnp.asarray([jnp.nan, 1.5]), jnp.asarray([-1.0, jnp.nan]))
+  assert np.all(np.asarray(nan) == planner.LUT_OUTSIDE)
 
 
 def test_value_and_direction_matches_nav_value_and_descent_direction(env):
@@ -266,6 +273,23 @@ def test_value_and_direction_matches_nav_value_and_descent_direction(env):
   np.testing.assert_allclose(np.asarray(val), np.asarray(val_r), rtol=1e-6)   # XLA may contract a*b+c (FMA)
   np.testing.assert_allclose(np.asarray(d), np.asarray(d_r), atol=1e-4)
   assert (np.asarray(val) == navigation.UNREACHABLE).any() and (np.asarray(val) < 50).any()
+
+
+def test_planner_stops_a_robot_with_a_non_finite_pose(env):
+  """A NaN or infinite pose reads as off the costmap: every candidate is blocked, the robot stops (flagged)."""
+  s = _situations(env, seed=2, clusters=1)
+  p, cfg = env.params, env.config
+  pose = np.array(s["pose"][0])
+  pose[0, 0], pose[1, 2], pose[2, 1] = np.nan, np.nan, np.inf
+  lut = jax.vmap(planner.lookup_table)(s["cost"][0])
+  plan = jax.jit(jax.vmap(lambda q, c, g, lut, o, rs, ok: planner.plan_lut_one(
+      q, c, g, jnp.inf, False, lut, o, rs, jnp.asarray(pose[:, :2]), ok, p.nav, p.speed, p.speed_cap,
+      config=cfg, extra_speeds=env.zone_speeds)))
+  cmd, info = plan(jnp.asarray(pose), s["cmd"][0], s["goal"][0], lut, s["origin"][0], s["res"][0],
+                   ~jnp.eye(K, dtype=bool))
+  cmd, stopped = np.asarray(cmd), np.asarray(info["stopped"])
+  assert stopped[:3].all() and np.all(cmd[:3] == 0.0)
+  assert np.all(np.isfinite(cmd))
 
 
 def test_rollout_grid_rejects_an_unknown_mode():
