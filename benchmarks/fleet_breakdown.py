@@ -3,6 +3,7 @@
     python benchmarks/fleet_breakdown.py 65536            # the lead's GPU run (B = 8192 worlds x 8)
     python benchmarks/fleet_breakdown.py 512 --repeats 3  # CPU, a few minutes
     python benchmarks/fleet_breakdown.py 512 --only full,physics
+    python benchmarks/fleet_breakdown.py 65536 --time-budget 500   # under a 10-minute limit
 
 Every variant is the real fleet rollout (`FleetEnv.rollout_fn`, 100 physics steps
 of 0.01 s by default, record=False) with one thing changed, so the time of a part
@@ -289,6 +290,9 @@ def main(argv=None) -> int:
   ap.add_argument("--steps", type=int, default=100, help="physics steps per timed call (default 100)")
   ap.add_argument("--repeats", type=int, default=3, help="timed calls per variant, best kept (default 3)")
   ap.add_argument("--only", default="", help="comma-separated variant names (default: all)")
+  ap.add_argument("--time-budget", type=float, default=None, metavar="S",
+                  help="start no further variant after S seconds (the first always runs; the rest "
+                       "are reported as skipped), so a run under a time limit still prints its JSON line")
   args = ap.parse_args(sys.argv[1:] if argv is None else argv)
   base = FleetConfig()
   table = variants(base)
@@ -302,9 +306,18 @@ def main(argv=None) -> int:
   if args.num_robots < 1 or args.steps < 1 or args.repeats < 1:
     ap.error(f"num_robots, --steps and --repeats must be >= 1; got {args.num_robots}, {args.steps}, "
              f"{args.repeats}")
+  if args.num_robots % base.robots_per_world:
+    ap.error(f"num_robots must be a multiple of robots_per_world = {base.robots_per_world} "
+             f"(worlds of {base.robots_per_world} robots); got {args.num_robots}")
+  if args.time_budget is not None and not args.time_budget > 0:
+    ap.error(f"--time-budget must be > 0 seconds; got {args.time_budget}")
   results = {}
   t0 = time.perf_counter()
   for name in names:
+    if results and args.time_budget is not None and time.perf_counter() - t0 > args.time_budget:
+      results[name] = f"skipped: --time-budget {args.time_budget:g} s spent"
+      print(f"{name:24s} {results[name]}", file=sys.stderr, flush=True)
+      continue
     try:
       if name == "bare_mjx":
         results[name] = _bare(args.num_robots, args.steps, args.repeats)
