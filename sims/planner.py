@@ -28,6 +28,14 @@ ahead. Reversing is used only in recovery mode or when every forward
 candidate is blocked; if every candidate collides, the robot stops (it never
 drives into a keepout cell).
 
+Cost of a tick (the fleet's largest part; benchmarks/fleet_breakdown.py
+times it): the candidates form a speeds x yaw rates grid, so speed ramps and
+heading rotations run once per axis value (`rollout_grid`); the costmap rules
+are one uint16 code per cell (`lookup_table`, built with the costmap at its
+5 Hz rate), so each rollout point costs one gather for every rule and the
+clearance; the navigation value and its descent stencil are one gather per
+candidate (`navigation.value_and_direction`).
+
 Written for one robot; sims/env.py vmaps it over the robots of a world.
 """
 
@@ -262,7 +270,16 @@ def speed_cap_at(speed_cap: jax.Array, mask_origin: jax.Array, mask_res: jax.Arr
 
 def speed_cap_xy(speed_cap: jax.Array, mask_origin: jax.Array, mask_res: jax.Array, x: jax.Array,
                  y: jax.Array) -> jax.Array:
-  """`speed_cap_at` with the coordinates as two arrays of the same shape (x [...], y [...], m)."""
+  """`speed_cap_at` with the coordinates as two arrays.
+
+  Args:
+    speed_cap: float32 [Hs, Ws] m/s per speed-mask cell (+inf none).
+    mask_origin: float32 [2] (m); mask_res: float32 [] metres per cell.
+    x, y: float32 [...] point coordinates (m), the same shape.
+
+  Returns:
+    float32 [...] m/s cap per point; +inf off the mask (and for NaN or infinite points).
+  """
   h, w = speed_cap.shape
   flat, inside = _flat_cell(x, y, mask_origin, 1.0 / mask_res, h, w)
   return jnp.where(inside, speed_cap.reshape(-1)[flat], jnp.inf)
@@ -406,7 +423,23 @@ def plan_one(pose, cmd, goal, limit_now, recovering, cost, hard, origin, res, ot
 def plan_lut_one(pose, cmd, goal, limit_now, recovering, lut, origin, res, others, others_valid,
                  nav: navigation.NavField, speed_mask: FilterMask, speed_cap: jax.Array, *,
                  config: FleetConfig, extra_speeds: tuple[float, ...] = ()):
-  """`plan_one` on the costmap's `lookup_table` (uint16 [N, N] `lut`); other arguments and result as there."""
+  """`plan_one` on the costmap's `lookup_table`, built once per costmap update (sims/env.py).
+
+  Args:
+    pose: float32 [3] robot (x m, y m, yaw rad); a non-finite pose stops the robot.
+    cmd: float32 [2] last command (v m/s, w rad/s).
+    goal: int32 [] station index.
+    limit_now: float32 [] speed cap in force (m/s, +inf none).
+    recovering: bool [] recovery mode.
+    lut: uint16 [N, N] `lookup_table` of the robot's local costmap; origin float32 [2] (m);
+      res float32 [] (m per cell).
+    others: float32 [K, 2] positions of the world's robots (m); others_valid bool [K].
+    nav, speed_mask, speed_cap, config, extra_speeds: as `plan_one`.
+
+  Returns:
+    (command float32 [2], info dict: 'stopped' bool [], 'speed_violation' float32 [] m/s x s),
+    as `plan_one`.
+  """
   ev = evaluate_lut(pose, cmd, goal, limit_now, recovering, lut, origin, res, others, others_valid, nav,
                     speed_mask, speed_cap, config=config, extra_speeds=extra_speeds, full=False)
   r = config.robot
@@ -449,9 +482,17 @@ def evaluate(pose, cmd, goal, limit_now, recovering, cost, hard, origin, res, ot
 def evaluate_lut(pose, cmd, goal, limit_now, recovering, lut, origin, res, others, others_valid,
                  nav: navigation.NavField, speed_mask: FilterMask, speed_cap: jax.Array, *,
                  config: FleetConfig, extra_speeds: tuple[float, ...] = (), full: bool = True) -> dict:
-  """`evaluate` on the costmap's `lookup_table` (uint16 [N, N] `lut`).
+  """`evaluate` on the costmap's `lookup_table`.
 
-  `full=False` leaves out 'xy', which only plots and tests read.
+  Args:
+    pose, cmd, goal, limit_now, recovering, lut, origin, res, others, others_valid, nav,
+      speed_mask, speed_cap, config, extra_speeds: as `plan_lut_one`.
+    full: static; False leaves out 'xy', which only plots and tests read.
+
+  Returns:
+    dict of per-candidate arrays (C = Nv * Nw, speed-major): targets float32 [C, 2],
+    xy float32 [C, T+1, 2] (m, only with full), collide bool [C], violation float32 [C]
+    (m/s x s), progress, heading, clearance, score float32 [C].
   """
   p, r = config.planner, config.robot
   speeds_np, yaw_rates_np = target_axes(config, extra_speeds)
