@@ -266,7 +266,7 @@ class FleetEnv:
     Returns:
       The next WorldState.
     """
-    cfg, p = self.config, self.params
+    cfg = self.config
     with jax.named_scope("fleet_step"):
       action = jnp.asarray(action, jnp.int32)
       override = action >= 0
