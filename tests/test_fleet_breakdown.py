@@ -26,6 +26,9 @@ def test_parts_are_differences_of_the_variants():
   assert p["per_candidate"] == pytest.approx(1.0) and p["planner_fixed_part"] == pytest.approx(80.0 - 81.0)
   assert p["full_fraction_of_bare"] == pytest.approx(0.1)
   assert "speed_cap_lookups" not in p          # a failed variant leaves its part out
+  cpu = fb.parts({"physics": _r(12.0, cpu_ns_per_robot_step=20.0), "metrics": _r(15.0, cpu_ns_per_robot_step=26.0),
+                  "bare_mjx": _r(10.0)}, "cpu_ns_per_robot_step")
+  assert cpu == {"physics": 20.0, "metrics": 6.0}      # bare_mjx has no CPU figure: no fraction
 
 
 def test_patches_are_undone_and_missing_names_listed():
@@ -66,3 +69,4 @@ def test_small_run_prints_one_json_line(capsys):
   assert phys["robot_seconds_per_s"] == pytest.approx(phys["robot_steps_per_s"] * 0.01)
   assert report["variants"]["metrics"].startswith("skipped: --time-budget")
   assert report["num_robots"] == 16 and report["physics_steps"] == 20 and report["parts_ns"]["physics"] > 0
+  assert report["parts_cpu_ns"]["physics"] > 0              # this test runs on the CPU backend
