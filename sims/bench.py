@@ -39,6 +39,37 @@ def _best_of(fn, args, repeats: int) -> float:
   return best
 
 
+def time_rollout(env: FleetEnv, num_worlds: int, env_steps: int, *, repeats: int = 3,
+                 seed: int = 0) -> dict:
+  """Compiles and times `env.rollout_fn(env_steps, record=False)` over `num_worlds` worlds.
+
+  Args:
+    env: a FleetEnv (or a subclass of it, e.g. a benchmark variant).
+    num_worlds: W.
+    env_steps: env steps per call (1 / costmap_hz s each).
+    repeats: timed runs after compiling; the best is kept.
+    seed: PRNG seed of the reset.
+
+  Returns:
+    dict with compile_s (ahead-of-time compile, s), run_s (best wall time of one call after a
+    warm-up call, s) and cpu_s (least host CPU time of one call, all threads, s: on a shared
+    CPU machine it varies less with other load than the wall time).
+  """
+  states = env.reset_fn()(env.params, env.world_keys(jax.random.PRNGKey(seed), num_worlds))
+  jax.block_until_ready(states)
+  run = env.rollout_fn(env_steps, record=False)
+  t = time.perf_counter()
+  compiled = run.compile(env.params, states)
+  compile_s = time.perf_counter() - t
+  jax.block_until_ready(compiled(env.params, states))          # warm-up, not timed
+  run_s = cpu_s = math.inf
+  for _ in range(repeats):
+    t, c = time.perf_counter(), time.process_time()
+    jax.block_until_ready(compiled(env.params, states))
+    run_s, cpu_s = min(run_s, time.perf_counter() - t), min(cpu_s, time.process_time() - c)
+  return {"compile_s": compile_s, "run_s": run_s, "cpu_s": cpu_s}
+
+
 def bare_mjx_rollout(config: FleetConfig, num_robots: int, num_steps: int):
   """The bare MJX step of B robots: `lax.scan` of vmapped mjx.step, no filters.
 
@@ -94,7 +125,8 @@ def fleet_throughput(num_robots: int, num_steps: int, filters: bool = True, impl
       robots_per_world and impl are replaced by the arguments above).
 
   Returns:
-    dict with robot_steps_per_s, compile_s, run_s, num_robots, num_worlds,
+    dict with robot_steps_per_s, robot_seconds_per_s (simulated robot-seconds
+    per wall second: robot_steps_per_s x physics_dt), compile_s, run_s, num_robots, num_worlds,
     robots_per_world, physics_steps (per robot), filters, impl, device.
 
   Raises:
@@ -111,13 +143,8 @@ def fleet_throughput(num_robots: int, num_steps: int, filters: bool = True, impl
     per_env_step = config.ticks_per_step * config.substeps_per_tick
     env_steps = -(-num_steps // per_env_step)
     physics_steps = env_steps * per_env_step
-    states = env.reset_fn()(env.params, env.world_keys(jax.random.PRNGKey(seed), num_worlds))
-    jax.block_until_ready(states)
-    run = env.rollout_fn(env_steps, record=False)
-    t = time.perf_counter()
-    compiled = run.compile(env.params, states)
-    compile_s = time.perf_counter() - t
-    run_s = _best_of(compiled, (env.params, states), repeats)
+    timed = time_rollout(env, num_worlds, env_steps, repeats=repeats, seed=seed)
+    compile_s, run_s = timed["compile_s"], timed["run_s"]
   else:
     num_worlds = num_robots
     physics_steps = num_steps
@@ -128,6 +155,7 @@ def fleet_throughput(num_robots: int, num_steps: int, filters: bool = True, impl
     run_s = _best_of(compiled, (data,), repeats)
   return {
       "robot_steps_per_s": num_robots * physics_steps / run_s,
+      "robot_seconds_per_s": num_robots * physics_steps * config.physics_dt / run_s,
       "compile_s": compile_s,
       "run_s": run_s,
       "num_robots": num_robots,

@@ -65,7 +65,7 @@ class WorldState:
     speed_cap: float32 [K], speed limit in force (m/s; +inf = none).
     keepout: KeepoutState [K] of the keepout filter.
     local: Costmap [K] rolling local costmaps (uint8 [K, N, N]).
-    local_hard: uint8 [K, N, N], `planner.hard_cells` of each local costmap.
+    plan_lut: uint16 [K, N, N], `planner.lookup_table` of each local costmap (built with it).
     progress_anchor: float32 [K, 2], progress checker reference position.
     progress_time: float32 [K], seconds since the robot last moved progress_radius.
     blocked_time: float32 [K], seconds slower than 0.02 m/s away from the goal.
@@ -82,7 +82,7 @@ class WorldState:
   speed_cap: jax.Array
   keepout: KeepoutState
   local: Costmap
-  local_hard: jax.Array
+  plan_lut: jax.Array
   progress_anchor: jax.Array
   progress_time: jax.Array
   blocked_time: jax.Array
@@ -267,7 +267,7 @@ class FleetEnv:
     return WorldState(
         data=data, cmd=jnp.zeros((k, 2), _F32), goal=goal, speed=SpeedState.create(k),
         speed_cap=jnp.full((k,), jnp.inf, _F32), keepout=KeepoutState.create(k), local=local,
-        local_hard=jnp.ones((k, n, n), jnp.uint8),
+        plan_lut=jax.vmap(planner.lookup_table)(local.cost, jnp.ones((k, n, n), jnp.uint8)),
         progress_anchor=xy, progress_time=jnp.zeros((k,), _F32), blocked_time=jnp.zeros((k,), _F32),
         recovery_time=jnp.zeros((k,), _F32), in_keepout=in_keepout,
         in_contact=false, in_near=false,
@@ -286,7 +286,7 @@ class FleetEnv:
     Returns:
       The next WorldState.
     """
-    cfg, p = self.config, self.params
+    cfg = self.config
     with jax.named_scope("fleet_step"):
       action = jnp.asarray(action, jnp.int32)
       override = action >= 0
@@ -295,12 +295,7 @@ class FleetEnv:
           state, goal=jnp.where(override, action, state.goal),
           progress_anchor=jnp.where(override[:, None], poses[:, :2], state.progress_anchor),
           progress_time=jnp.where(override, 0.0, state.progress_time))
-      local, kstate = local_costmap.local_costmaps(
-          p.static_cost, p.map_origin, p.map_resolution, self.world.pad, p.keepout, poses,
-          state.keepout, n=self.world.window_cells, robot_radius=cfg.robot.radius,
-          inflation=self.world.inflation, keepout_config=self.world.keepout_config)
-      state = dataclasses.replace(state, local=local, keepout=kstate,
-                                  local_hard=jax.vmap(planner.hard_cells)(local.cost))
+      state = self._update_costmaps(state)
       t0 = state.time
       state, _ = jax.lax.scan(lambda s, i: (self._tick(s, t0 + i.astype(_F32) * jnp.float32(cfg.control_dt)), None),
                               state, jnp.arange(cfg.ticks_per_step))
@@ -333,9 +328,30 @@ class FleetEnv:
     return jax.vmap(lambda q: metrics_lib.footprint_in_keepout(self.params.keepout, q, radius=r,
                                                                window=window))(xy)
 
-  def _tick(self, s: WorldState, t0=None) -> WorldState:
+  def _update_costmaps(self, state: WorldState) -> WorldState:
+    """Rebuilds every robot's local costmap (and the planner's table of it) at the current poses."""
     cfg, p = self.config, self.params
-    t0 = s.time if t0 is None else t0
+    poses = state.data.qpos[:, :3]
+    local, kstate = local_costmap.local_costmaps(
+        p.static_cost, p.map_origin, p.map_resolution, self.world.pad, p.keepout, poses,
+        state.keepout, n=self.world.window_cells, robot_radius=cfg.robot.radius,
+        inflation=self.world.inflation, keepout_config=self.world.keepout_config)
+    return dataclasses.replace(state, local=local, keepout=kstate,
+                               plan_lut=jax.vmap(planner.lookup_table)(local.cost))
+
+  def _tick(self, s: WorldState, t0=None) -> WorldState:
+    """One controller tick starting at time t0 (s; default s.time): the controller's command,
+    then `substeps_per_tick` physics steps."""
+    s, v, w = self._control(s)
+    return self._physics(s, v, w, s.time if t0 is None else t0)
+
+  def _control(self, s: WorldState) -> tuple[WorldState, jax.Array, jax.Array]:
+    """Speed filter, goals and progress checker, recovery, planner and the clip of one tick.
+
+    Returns:
+      (the state with the tick's controller fields updated, v float32 [K] m/s, w float32 [K] rad/s).
+    """
+    cfg, p = self.config, self.params
     r = cfg.robot
     k = self.num_robots
     dt = cfg.control_dt
@@ -366,22 +382,37 @@ class FleetEnv:
     blocked = jnp.where(start, 0.0, blocked)
 
     # Local planner, then the hard clip to the limit in force.
-    plan = functools.partial(planner.plan_one, nav=p.nav, speed_mask=p.speed, speed_cap=p.speed_cap,
-                             config=cfg, extra_speeds=self.zone_speeds)
     # In a zone (escape mode on): steer by the exit field, nav.dist[S], the shortest way out.
     steer = jnp.where(s.keepout.is_pose_lethal, p.nav.stations.shape[0], goal) if self.keepout_escape else goal
-    cmd, info = jax.vmap(plan, in_axes=(0, 0, 0, 0, 0, 0, 0, 0, 0, None, 0))(
-        poses, s.cmd, steer, cap, recovery > 0, s.local.cost, s.local_hard, s.local.origin,
-        s.local.resolution, poses[:, :2], ~jnp.eye(k, dtype=bool))
+    cmd, stopped = self._plan(s, poses, steer, cap, recovery > 0)
     v = jnp.clip(cmd[:, 0], -cap, cap)
     w = cmd[:, 1]
     if cfg.limit_angular:
       w_cap = r.max_yaw_rate * jnp.minimum(cap / r.max_speed, 1.0)
       w = jnp.clip(w, -w_cap, w_cap)
     cmd = jnp.stack([v, w], axis=1)
-    m = dataclasses.replace(m, emergency_stops=m.emergency_stops + info["stopped"].astype(jnp.int32))
+    m = dataclasses.replace(m, emergency_stops=m.emergency_stops + stopped.astype(jnp.int32))
+    s = dataclasses.replace(
+        s, cmd=cmd, goal=goal, speed=speed_state, speed_cap=cap, progress_anchor=anchor,
+        progress_time=ptime, blocked_time=blocked, recovery_time=recovery, metrics=m, key=key)
+    return s, v, w
 
-    # Physics.
+  def _plan(self, s: WorldState, poses: jax.Array, goal: jax.Array, cap: jax.Array,
+            recovering: jax.Array) -> tuple[jax.Array, jax.Array]:
+    """The local planner of every robot: (command float32 [K, 2], stopped bool [K])."""
+    p, k = self.params, self.num_robots
+    plan = functools.partial(planner.plan_lut_one, nav=p.nav, speed_mask=p.speed, speed_cap=p.speed_cap,
+                             config=self.config, extra_speeds=self.zone_speeds)
+    cmd, info = jax.vmap(plan, in_axes=(0, 0, 0, 0, 0, 0, 0, 0, None, 0))(
+        poses, s.cmd, goal, cap, recovering, s.plan_lut, s.local.origin,
+        s.local.resolution, poses[:, :2], ~jnp.eye(k, dtype=bool))
+    return cmd, info["stopped"]
+
+  def _physics(self, s: WorldState, v: jax.Array, w: jax.Array, t0: jax.Array) -> WorldState:
+    """`substeps_per_tick` physics steps at the twist (v, w) from time t0 (s) with the per-step
+    metrics, then proximity."""
+    cfg, p = self.config, self.params
+
     def substep(carry, j):
       data, m, in_k = carry
       th = data.qpos[:, 2]
@@ -399,13 +430,10 @@ class FleetEnv:
         m = metrics_lib.footprint_update(m, self._footprint_in_keepout(xy), t)
       return (data, m, in_k), None
 
-    (data, m, in_k), _ = jax.lax.scan(substep, (s.data, m, s.in_keepout), jnp.arange(cfg.substeps_per_tick))
+    (data, m, in_k), _ = jax.lax.scan(substep, (s.data, s.metrics, s.in_keepout), jnp.arange(cfg.substeps_per_tick))
     m, contact, near = metrics_lib.proximity_update(m, s.in_contact, s.in_near, data.qpos[:, :2],
-                                                   r.radius, cfg.near_miss_margin)
-    return dataclasses.replace(
-        s, data=data, cmd=cmd, goal=goal, speed=speed_state, speed_cap=cap, progress_anchor=anchor,
-        progress_time=ptime, blocked_time=blocked, recovery_time=recovery, in_keepout=in_k,
-        in_contact=contact, in_near=near, metrics=m, key=key)
+                                                   cfg.robot.radius, cfg.near_miss_margin)
+    return dataclasses.replace(s, data=data, in_keepout=in_k, in_contact=contact, in_near=near, metrics=m)
 
   # ------------------------------------------------------------------ batching
 

@@ -29,6 +29,14 @@ ahead. Reversing is used only in recovery mode or when every forward
 candidate is blocked; if every candidate collides, the robot stops (it never
 drives into a keepout cell).
 
+Cost of a tick (the fleet's largest part; benchmarks/fleet_breakdown.py
+times it): the candidates form a speeds x yaw rates grid, so speed ramps and
+heading rotations run once per axis value (`rollout_grid`); the costmap rules
+are one uint16 code per cell (`lookup_table`, built with the costmap at its
+5 Hz rate), so each rollout point costs one gather for every rule and the
+clearance; the navigation value and its descent stencil are one gather per
+candidate (`navigation.value_and_direction`).
+
 Written for one robot; sims/env.py vmaps it over the robots of a world.
 """
 
@@ -50,6 +58,26 @@ _REVERSE = 1e4         # reversing outside recovery: only when every forward can
 _MONITORED = 4         # nearest other robots the collision monitor checks
 
 
+def target_axes(config: FleetConfig, extra_speeds: tuple[float, ...] = ()) -> tuple[np.ndarray, np.ndarray]:
+  """The two axes of the candidate grid: target speeds and target yaw rates.
+
+  Args:
+    config: planner and robot limits.
+    extra_speeds: more linear speeds to try (m/s), see `candidates`.
+
+  Returns:
+    (speeds float32 [Nv] in m/s, ascending: num_speeds in [0, max_speed], the
+    extra speeds in (0, max_speed) and -reverse_speed; yaw rates float32 [Nw]
+    in rad/s). `candidates` is their product, speed-major.
+  """
+  p, r = config.planner, config.robot
+  v = np.linspace(0.0, r.max_speed, p.num_speeds)
+  extra = [float(e) for e in extra_speeds if 0.0 < e < r.max_speed]
+  v = np.unique(np.concatenate([v, np.asarray(extra + [-p.reverse_speed], np.float64)]))
+  w = np.linspace(-r.max_yaw_rate, r.max_yaw_rate, p.num_yaw_rates) if p.num_yaw_rates > 1 else np.zeros(1)
+  return v.astype(np.float32), w.astype(np.float32)
+
+
 def candidates(config: FleetConfig, extra_speeds: tuple[float, ...] = ()) -> np.ndarray:
   """float32 [C, 2] target twists (v, w).
 
@@ -59,14 +87,11 @@ def candidates(config: FleetConfig, extra_speeds: tuple[float, ...] = ()) -> np.
       zone's limit so robots use a zone's full allowance.
 
   Returns:
-    C = (num_speeds + extra speeds in (0, max_speed) + 1 reverse speed) * num_yaw_rates
-    targets. The reverse speed (-reverse_speed) is only used in recovery mode.
+    C = Nv * Nw targets (`target_axes`, speed-major: candidate i * Nw + j is
+    speed i, yaw rate j), Nv = num_speeds + extra speeds in (0, max_speed) + 1
+    reverse speed. The reverse speed (-reverse_speed) is only used in recovery mode.
   """
-  p, r = config.planner, config.robot
-  v = np.linspace(0.0, r.max_speed, p.num_speeds)
-  extra = [float(e) for e in extra_speeds if 0.0 < e < r.max_speed]
-  v = np.unique(np.concatenate([v, np.asarray(extra + [-p.reverse_speed], np.float64)]))
-  w = np.linspace(-r.max_yaw_rate, r.max_yaw_rate, p.num_yaw_rates) if p.num_yaw_rates > 1 else np.zeros(1)
+  v, w = target_axes(config, extra_speeds)
   vv, ww = np.meshgrid(v, w, indexing="ij")
   return np.stack([vv.ravel(), ww.ravel()], axis=1).astype(np.float32)
 
@@ -96,11 +121,9 @@ def rollout(pose: jax.Array, cmd: jax.Array, targets: jax.Array, config: FleetCo
     (xy float32 [C, T+1, 2] with xy[:, 0] = pose, heading unit vectors
     float32 [C, 2] at the end, v float32 [C, T+1]).
   """
+  _check_series(config)
   p, r = config.planner, config.robot
   dt = p.rollout_dt
-  if r.max_yaw_rate * dt > 0.6:
-    raise ValueError(f"max_yaw_rate * rollout_dt must be <= 0.6 rad for the rollout's series; "
-                     f"got {r.max_yaw_rate * dt}")
   c = targets.shape[0]
   x = jnp.full((c,), pose[0])
   y = jnp.full((c,), pose[1])
@@ -120,6 +143,91 @@ def rollout(pose: jax.Array, cmd: jax.Array, targets: jax.Array, config: FleetCo
     xs.append(x), ys.append(y), vs.append(v)
   xy = jnp.stack([jnp.stack(xs, 1), jnp.stack(ys, 1)], axis=-1)
   return xy, jnp.stack([hc, hs], axis=1), jnp.stack(vs, 1)
+
+
+def _check_series(config: FleetConfig) -> None:
+  r, dt = config.robot, config.planner.rollout_dt
+  if r.max_yaw_rate * dt > 0.6:
+    raise ValueError(f"max_yaw_rate * rollout_dt must be <= 0.6 rad for the rollout's series; "
+                     f"got {r.max_yaw_rate * dt}")
+
+
+def _rollout_mode() -> str:
+  """The default `rollout_grid` mode of this backend (see there)."""
+  return "cumsum" if jax.default_backend() == "cpu" else "chain"
+
+
+def rollout_grid(pose: jax.Array, cmd: jax.Array, speeds: jax.Array, yaw_rates: jax.Array,
+                 config: FleetConfig, *, mode: str | None = None) -> dict:
+  """`rollout` of the candidate grid speeds x yaw_rates, sharing what candidates share.
+
+  A candidate's speed profile depends only on its target speed and its heading
+  only on its target yaw rate, so the ramps run once per speed (Nv) and the
+  heading rotations once per yaw rate (Nw), as [Nv, T] and [Nw, T] tables; each
+  candidate's points then add up its steps (v_t dt) (cos, sin)(midpoint heading_t),
+  and its interval midpoints are the points less half a step. The ramps and
+  headings are `rollout`'s float32 operations; the positions differ from its
+  step-by-step sums by float rounding (< 1e-5 m over the horizon;
+  tests/test_fleet_perf.py).
+
+  `mode` picks how the sums run: "cumsum" (one cumulative sum over T, the
+  points materialised behind an optimization barrier: XLA:CPU otherwise fuses
+  the chain into every consumer) or "chain" (T dependent adds and no barrier,
+  so a GPU can fuse the whole rollout into each lookup instead of writing and
+  re-reading [Nv, Nw, T] arrays per robot); None picks "cumsum" on CPU and
+  "chain" elsewhere. benchmarks/fleet_breakdown.py times both.
+
+  Args:
+    pose: float32 [3] (x, y, yaw).
+    cmd: float32 [2] the last command (v, w).
+    speeds: float32 [Nv] target speeds (m/s); yaw_rates: float32 [Nw] (rad/s).
+    config: static FleetConfig.
+    mode: static "cumsum", "chain" or None (see above).
+
+  Returns:
+    dict of float32 arrays: 'x', 'y' [Nv, Nw, T] rollout points 1..T (m),
+    'mx', 'my' [Nv, Nw, T] interval midpoints (m), 'v' [Nv, T+1] speed profile
+    (v[:, 0] = cmd[0]), 'hc', 'hs' [Nw] heading unit vector at the end.
+  """
+  _check_series(config)
+  mode = _rollout_mode() if mode is None else mode
+  if mode not in ("cumsum", "chain"):
+    raise ValueError(f"rollout_grid mode must be 'cumsum', 'chain' or None; got {mode!r}")
+  p, r = config.planner, config.robot
+  dt = p.rollout_dt
+  nv, nw = speeds.shape[0], yaw_rates.shape[0]
+  v = jnp.full((nv,), cmd[0])
+  w = jnp.full((nw,), cmd[1])
+  hc = jnp.full((nw,), jnp.cos(pose[2]))
+  hs = jnp.full((nw,), jnp.sin(pose[2]))
+  vs, mcs, mss = [v], [], []
+  for _ in range(p.num_rollout_steps):
+    v = v + jnp.clip(speeds - v, -r.max_accel * dt, r.max_accel * dt)
+    w = w + jnp.clip(yaw_rates - w, -r.max_yaw_accel * dt, r.max_yaw_accel * dt)
+    ch, sh = _cos_sin_small(0.5 * w * dt)
+    mc, ms = hc * ch - hs * sh, hs * ch + hc * sh          # midpoint heading [Nw]
+    hc, hs = mc * ch - ms * sh, ms * ch + mc * sh          # end-of-step heading
+    vs.append(v), mcs.append(mc), mss.append(ms)
+  v = jnp.stack(vs, -1)                                    # [Nv, T+1]
+  vdt = v[:, 1:] * dt                                      # [Nv, T]
+  step_x = vdt[:, None, :] * jnp.stack(mcs, -1)[None, :, :]   # [Nv, Nw, T]
+  step_y = vdt[:, None, :] * jnp.stack(mss, -1)[None, :, :]
+  if mode == "cumsum":
+    x = pose[0] + jnp.cumsum(step_x, axis=-1)
+    y = pose[1] + jnp.cumsum(step_y, axis=-1)
+    out = {"x": x, "y": y, "mx": x - 0.5 * step_x, "my": y - 0.5 * step_y}
+    # Materialise the points once: without the barrier XLA:CPU may fuse (recompute) the
+    # sums into each of their consumers.
+    out = jax.lax.optimization_barrier(out)
+  else:
+    xs, ys = [], []
+    x, y = pose[0], pose[1]
+    for t in range(p.num_rollout_steps):
+      x, y = x + step_x[..., t], y + step_y[..., t]
+      xs.append(x), ys.append(y)
+    x, y = jnp.stack(xs, -1), jnp.stack(ys, -1)
+    out = {"x": x, "y": y, "mx": x - 0.5 * step_x, "my": y - 0.5 * step_y}
+  return {**out, "v": v, "hc": hc, "hs": hs}
 
 
 def local_cost_at(cost: jax.Array, origin: jax.Array, res: jax.Array, xy: jax.Array) -> jax.Array:
@@ -158,12 +266,41 @@ def speed_cap_at(speed_cap: jax.Array, mask_origin: jax.Array, mask_res: jax.Arr
   Returns:
     float32 [...] m/s cap per point.
   """
+  return speed_cap_xy(speed_cap, mask_origin, mask_res, xy[..., 0], xy[..., 1])
+
+
+def speed_cap_xy(speed_cap: jax.Array, mask_origin: jax.Array, mask_res: jax.Array, x: jax.Array,
+                 y: jax.Array) -> jax.Array:
+  """`speed_cap_at` with the coordinates as two arrays.
+
+  Args:
+    speed_cap: float32 [Hs, Ws] m/s per speed-mask cell (+inf none).
+    mask_origin: float32 [2] (m); mask_res: float32 [] metres per cell.
+    x, y: float32 [...] point coordinates (m), the same shape.
+
+  Returns:
+    float32 [...] m/s cap per point; +inf off the mask (and for NaN or infinite points).
+  """
   h, w = speed_cap.shape
-  o = jnp.reshape(mask_origin, (1,) * (xy.ndim - 1) + (2,))
-  ij = jnp.floor((xy - o) / mask_res).astype(jnp.int32)
-  inside = (ij[..., 0] >= 0) & (ij[..., 0] < w) & (ij[..., 1] >= 0) & (ij[..., 1] < h)
-  v = speed_cap[jnp.clip(ij[..., 1], 0, h - 1), jnp.clip(ij[..., 0], 0, w - 1)]
-  return jnp.where(inside, v, jnp.inf)
+  flat, inside = _flat_cell(x, y, mask_origin, 1.0 / mask_res, h, w)
+  return jnp.where(inside, speed_cap.reshape(-1)[flat], jnp.inf)
+
+
+def _flat_cell(x: jax.Array, y: jax.Array, origin: jax.Array, inv_res: jax.Array, h: int, w: int):
+  """Row-major cell index of points on an h x w grid, and whether they are on it.
+
+  Multiplies by 1 / resolution (a division costs several multiplies on a GPU):
+  a point within float rounding of a cell edge may read the neighbouring cell,
+  as with a division. The range check is on the floats, so NaN and infinite
+  points are off the grid (XLA converts NaN to integer 0, a valid cell).
+
+  Returns:
+    (int32 [...] flat index, 0 off the grid; bool [...] on the grid).
+  """
+  u = jnp.floor((x - origin[0]) * inv_res)
+  v = jnp.floor((y - origin[1]) * inv_res)
+  inside = (u >= 0) & (u < w) & (v >= 0) & (v < h)
+  return jnp.where(inside, v.astype(jnp.int32) * w + u.astype(jnp.int32), 0), inside
 
 
 def hard_cells(cost: jax.Array) -> jax.Array:
@@ -183,6 +320,55 @@ def hard_cells(cost: jax.Array) -> jax.Array:
     for j in range(3):
       out = out | p[i:i + n0, j:j + n1]
   return out.astype(jnp.uint8)
+
+
+# Bits of a lookup-table code (`lookup_table`): what the planner needs of one local-costmap cell.
+LUT_LETHAL = 1        # cost >= LETHAL_OBSTACLE (lethal or unknown)
+LUT_HARD = 2          # `hard_cells`: the cell or one of its 8 neighbours is lethal or unknown
+LUT_INSCRIBED = 4     # cost == INSCRIBED_INFLATED_OBSTACLE
+LUT_CLEARANCE_SHIFT = 3   # code >> 3: the cost where it is <= MAX_NON_OBSTACLE, else 0
+LUT_OUTSIDE = LUT_LETHAL | LUT_HARD   # a point outside the window: unknown (255), so lethal and hard
+
+
+def lookup_table(cost: jax.Array, hard: jax.Array | None = None) -> jax.Array:
+  """The planner's per-cell table of a local costmap: one uint16 code per cell.
+
+  code = LUT_LETHAL | LUT_HARD | LUT_INSCRIBED flags | (clearance cost << 3), so
+  one gather per rollout point gives every collision rule and the clearance term,
+  and a candidate needs one OR and one MAX over its points. Built once per
+  costmap update (5 Hz), not per controller tick.
+
+  Args:
+    cost: uint8 [N, N] local costmap.
+    hard: optional uint8 [N, N] `hard_cells(cost)` (computed here when None).
+
+  Returns:
+    uint16 [N, N] codes.
+  """
+  if hard is None:
+    hard = hard_cells(cost)
+  u16 = jnp.uint16
+  clear = jnp.where(cost <= constants.MAX_NON_OBSTACLE, cost.astype(u16), u16(0))
+  return ((clear << LUT_CLEARANCE_SHIFT)
+          | jnp.where(cost >= constants.LETHAL_OBSTACLE, u16(LUT_LETHAL), u16(0))
+          | jnp.where(hard > 0, u16(LUT_HARD), u16(0))
+          | jnp.where(cost == constants.INSCRIBED_INFLATED_OBSTACLE, u16(LUT_INSCRIBED), u16(0)))
+
+
+def lut_at(lut: jax.Array, origin: jax.Array, res: jax.Array, x: jax.Array, y: jax.Array) -> jax.Array:
+  """Lookup-table codes at points; LUT_OUTSIDE outside the window (like `local_cost_at`'s 255).
+
+  Args:
+    lut: uint16 [N, N] `lookup_table` of a local costmap.
+    origin: float32 [2] window origin (m); res: float32 [] metres per cell.
+    x, y: float32 [...] point coordinates (m), the same shape.
+
+  Returns:
+    uint16 [...] codes.
+  """
+  n_rows, n_cols = lut.shape
+  flat, inside = _flat_cell(x, y, origin, 1.0 / res, n_rows, n_cols)
+  return jnp.where(inside, lut.reshape(-1)[flat], jnp.uint16(LUT_OUTSIDE))
 
 
 def limit_to_speed(limit: jax.Array, percent: jax.Array, valid: jax.Array, max_speed: float) -> jax.Array:
@@ -206,6 +392,10 @@ def plan_one(pose, cmd, goal, limit_now, recovering, cost, hard, origin, res, ot
              config: FleetConfig, extra_speeds: tuple[float, ...] = ()):
   """Chooses this control tick's command for one robot.
 
+  Builds the costmap's `lookup_table` and runs `plan_lut_one`; a caller that
+  plans several ticks on one costmap (sims/env.py) builds the table once and
+  calls `plan_lut_one` directly.
+
   Args:
     pose: float32 [3] robot (x, y, yaw).
     cmd: float32 [2] last command (v, w).
@@ -227,10 +417,34 @@ def plan_one(pose, cmd, goal, limit_now, recovering, cost, hard, origin, res, ot
     unless it is an emergency stop; info dict of scalars: 'stopped' bool,
     'speed_violation' float32 (m/s x s) of the chosen candidate).
   """
-  ev = evaluate(pose, cmd, goal, limit_now, recovering, cost, hard, origin, res, others, others_valid, nav,
-                speed_mask, speed_cap, config=config, extra_speeds=extra_speeds)
+  return plan_lut_one(pose, cmd, goal, limit_now, recovering, lookup_table(cost, hard), origin, res, others,
+                      others_valid, nav, speed_mask, speed_cap, config=config, extra_speeds=extra_speeds)
+
+
+def plan_lut_one(pose, cmd, goal, limit_now, recovering, lut, origin, res, others, others_valid,
+                 nav: navigation.NavField, speed_mask: FilterMask, speed_cap: jax.Array, *,
+                 config: FleetConfig, extra_speeds: tuple[float, ...] = ()):
+  """`plan_one` on the costmap's `lookup_table`, built once per costmap update (sims/env.py).
+
+  Args:
+    pose: float32 [3] robot (x m, y m, yaw rad); a non-finite pose stops the robot.
+    cmd: float32 [2] last command (v m/s, w rad/s).
+    goal: int32 [] station index.
+    limit_now: float32 [] speed cap in force (m/s, +inf none).
+    recovering: bool [] recovery mode.
+    lut: uint16 [N, N] `lookup_table` of the robot's local costmap; origin float32 [2] (m);
+      res float32 [] (m per cell).
+    others: float32 [K, 2] positions of the world's robots (m); others_valid bool [K].
+    nav, speed_mask, speed_cap, config, extra_speeds: as `plan_one`.
+
+  Returns:
+    (command float32 [2], info dict: 'stopped' bool [], 'speed_violation' float32 [] m/s x s),
+    as `plan_one`.
+  """
+  ev = evaluate_lut(pose, cmd, goal, limit_now, recovering, lut, origin, res, others, others_valid, nav,
+                    speed_mask, speed_cap, config=config, extra_speeds=extra_speeds, full=False)
   r = config.robot
-  best = jnp.argmin(ev["score"])
+  best = _first_argmin(ev["score"])
   stopped = ev["collide"][best]
   dt = config.control_dt
   target = ev["targets"][best]
@@ -238,6 +452,18 @@ def plan_one(pose, cmd, goal, limit_now, recovering, cost, hard, origin, res, ot
   new_w = cmd[1] + jnp.clip(target[1] - cmd[1], -r.max_yaw_accel * dt, r.max_yaw_accel * dt)
   command = jnp.where(stopped, jnp.zeros((2,), _F32), jnp.stack([new_v, new_w]).astype(_F32))
   return command, {"stopped": stopped, "speed_violation": jnp.where(stopped, 0.0, ev["violation"][best])}
+
+
+def _first_argmin(score: jax.Array) -> jax.Array:
+  """jnp.argmin of a 1-D array (the first minimum, or the first NaN) as a min and a masked index min.
+
+  XLA:CPU lowers argmin to a variadic (value, index) reduce that is several
+  times slower than two plain reductions.
+  """
+  c = score.shape[0]
+  low = jnp.min(score)
+  idx = jnp.arange(c, dtype=jnp.int32)
+  return jnp.min(jnp.where((score == low) | jnp.isnan(score), idx, c))
 
 
 def evaluate(pose, cmd, goal, limit_now, recovering, cost, hard, origin, res, others, others_valid,
@@ -250,82 +476,155 @@ def evaluate(pose, cmd, goal, limit_now, recovering, cost, hard, origin, res, ot
     violation [C] (excess speed integrated over the rollout, m/s x s), progress,
     heading, clearance, score [C].
   """
+  return evaluate_lut(pose, cmd, goal, limit_now, recovering, lookup_table(cost, hard), origin, res, others,
+                      others_valid, nav, speed_mask, speed_cap, config=config, extra_speeds=extra_speeds)
+
+
+def evaluate_lut(pose, cmd, goal, limit_now, recovering, lut, origin, res, others, others_valid,
+                 nav: navigation.NavField, speed_mask: FilterMask, speed_cap: jax.Array, *,
+                 config: FleetConfig, extra_speeds: tuple[float, ...] = (), full: bool = True) -> dict:
+  """`evaluate` on the costmap's `lookup_table`.
+
+  Args:
+    pose, cmd, goal, limit_now, recovering, lut, origin, res, others, others_valid, nav,
+      speed_mask, speed_cap, config, extra_speeds: as `plan_lut_one`.
+    full: static; False leaves out 'xy', which only plots and tests read.
+
+  Returns:
+    dict of per-candidate arrays (C = Nv * Nw, speed-major): targets float32 [C, 2],
+    xy float32 [C, T+1, 2] (m, only with full), collide bool [C], violation float32 [C]
+    (m/s x s), progress, heading, clearance, score float32 [C].
+  """
   p, r = config.planner, config.robot
+  speeds_np, yaw_rates_np = target_axes(config, extra_speeds)
+  nv, nw = speeds_np.shape[0], yaw_rates_np.shape[0]
+  c = nv * nw
   targets = jnp.asarray(candidates(config, extra_speeds))
-  # The barrier materialises the rollouts once: without it XLA:CPU may fuse (recompute) the
-  # whole T-step chain into each of its consumers below.
-  xy, head, v = jax.lax.optimization_barrier(rollout(pose, cmd, targets, config))  # [C,T+1,2],[C,2],[C,T+1]
+  with jax.named_scope("rollout"):
+    ro = rollout_grid(pose, cmd, jnp.asarray(speeds_np), jnp.asarray(yaw_rates_np), config)
+  x, y, mx, my, v = ro["x"], ro["y"], ro["mx"], ro["my"], ro["v"]      # [Nv, Nw, T] x4, [Nv, T+1]
 
-  # Collision against the local costmap, at points and interval midpoints (at most half a
-  # cell apart up to 0.5 m/s at 0.05 m cells). Lethal and unknown cells are also blocked one
-  # cell around (keepout cells are lethal but not inflated), so a path cannot clip a
-  # keepout corner between two samples.
-  mids = 0.5 * (xy[:, 1:] + xy[:, :-1])
-  pts = jnp.concatenate([mids, xy[:, 1:]], axis=1)               # [C, 2T, 2]
-  c_pts = local_cost_at(cost, origin, res, pts)
-  hard_pts = local_cost_at(hard, origin, res, pts)               # 255 outside the window
-  c_here = local_cost_at(cost, origin, res, pose[:2])
-  hard_here = local_cost_at(hard, origin, res, pose[:2]) > 0
-  # A robot on an inscribed cell may cross them to get off (another robot's inflation), unless
-  # the config follows Nav2's controllers, for which the centre on 253 is a collision.
-  escape = (c_here >= constants.INSCRIBED_INFLATED_OBSTACLE) & (not p.inscribed_is_collision)
-  blocked = ((c_pts >= constants.LETHAL_OBSTACLE) | ((hard_pts > 0) & ~hard_here)
-             | ((c_pts == constants.INSCRIBED_INFLATED_OBSTACLE) & ~escape))
-  collide = jnp.any(blocked, axis=1)
-  clearance = jnp.max(jnp.where(c_pts <= constants.MAX_NON_OBSTACLE, c_pts, 0), axis=1) / 252.0
+  def flat(a):  # [Nv, Nw, ...] -> [C, ...], candidate i * Nw + j
+    return a.reshape((c,) + a.shape[2:])
 
-  # Collision monitor against the nearest other robots' current positions (squared distances,
-  # every other rollout point: at most 0.1 m apart at 0.5 m/s).
+  with jax.named_scope("costmap_rules"):
+    collide, clearance = _costmap_rules(lut, origin, res, pose, x, y, mx, my,
+                                        inscribed_is_collision=p.inscribed_is_collision)
+  with jax.named_scope("monitor"):
+    approach, d2_end, neg, rel_near = _monitor(pose, others, others_valid, x, y, config)
+  collide = flat(collide) | approach
+  with jax.named_scope("speed_lookahead"):
+    violation = _speed_lookahead(speed_cap, speed_mask, pose, limit_now, x, y, mx, my, v, config)
+  with jax.named_scope("navigation"):
+    end = jnp.stack([flat(x[..., -1]), flat(y[..., -1])], axis=1)             # [C, 2]
+    start_val = navigation.nav_value(nav, goal, pose[:2])
+    end_val, desired = jax.vmap(lambda q: navigation.value_and_direction(nav, goal, q))(end)
+  head = jnp.stack([jnp.broadcast_to(ro["hc"], (nv, nw)).reshape(c),
+                    jnp.broadcast_to(ro["hs"], (nv, nw)).reshape(c)], axis=1)   # [C, 2]
+
+  with jax.named_scope("score"):
+    reach = r.max_speed * p.horizon
+    progress = (end_val - start_val) / reach
+    heading = 0.5 * (1.0 - jnp.sum(head * desired, axis=1))
+    speed_term = 1.0 - targets[:, 0] / r.max_speed
+    # Right-hand traffic: with another robot ahead (within 2 m, +-45 deg), prefer turning right,
+    # so two robots meeting head-on both veer right instead of blocking each other.
+    c_yaw, s_yaw = jnp.cos(pose[2]), jnp.sin(pose[2])
+    ahead_x = c_yaw * rel_near[:, 0] + s_yaw * rel_near[:, 1]
+    ahead_y = -s_yaw * rel_near[:, 0] + c_yaw * rel_near[:, 1]
+    oncoming = jnp.any(jnp.isfinite(neg) & (ahead_x > 0) & (jnp.abs(ahead_y) < ahead_x)
+                       & (ahead_x * ahead_x + ahead_y * ahead_y < 4.0))
+    keep_right = jnp.where(
+        oncoming, p.keep_right_weight * jnp.maximum(targets[:, 1], 0.0) / r.max_yaw_rate, 0.0)
+    reverse = targets[:, 0] < 0
+    normal = (p.progress_weight * progress + p.heading_weight * heading + keep_right
+              + jnp.where(reverse, _REVERSE, 0.0))
+    # Recovery: back away from the nearest robot (reversing allowed), turning right.
+    d_end = jnp.sqrt(jnp.min(jnp.where(jnp.isfinite(neg)[None, :], d2_end, jnp.inf), axis=1))
+    separation = -jnp.minimum(d_end, 2.0) / 2.0
+    recovery = 0.3 * p.progress_weight * progress + separation + 0.2 * targets[:, 1] / r.max_yaw_rate
+    score = (jnp.where(recovering, recovery, normal)
+             + p.clearance_weight * clearance + p.speed_weight * speed_term
+             + _SPEED_PENALTY * violation + jnp.where(collide, _COLLISION, 0.0))
+  out = {"targets": targets, "collide": collide, "violation": violation,
+         "progress": progress, "heading": heading, "clearance": clearance, "score": score}
+  if full:
+    xs = jnp.concatenate([jnp.full((c, 1), pose[0]), flat(x)], axis=1)
+    ys = jnp.concatenate([jnp.full((c, 1), pose[1]), flat(y)], axis=1)
+    out["xy"] = jnp.stack([xs, ys], axis=-1)
+  return out
+
+
+def _costmap_rules(lut, origin, res, pose, x, y, mx, my, *, inscribed_is_collision: bool = False):
+  """Collision against the local costmap and the clearance term, per candidate [Nv, Nw].
+
+  Checked at rollout points and interval midpoints (at most half a cell apart up
+  to 0.5 m/s at 0.05 m cells). Lethal and unknown cells are also blocked one cell
+  around (keepout cells are lethal but not inflated), so a path cannot clip a
+  keepout corner between two samples. One table code per point carries every rule.
+  With `inscribed_is_collision` (static; Nav2's controllers for a circular robot) an
+  inscribed cell blocks even a robot that stands on one.
+  """
+  code_mid = lut_at(lut, origin, res, mx, my)                     # [Nv, Nw, T]
+  code_end = lut_at(lut, origin, res, x, y)
+  here = lut_at(lut, origin, res, pose[0], pose[1])
+  # Flags that block a candidate for this robot: lethal/unknown always; a hard cell unless the
+  # robot stands on one; an inscribed cell unless it stands on an inscribed or lethal one.
+  rules = (jnp.uint16(LUT_LETHAL)
+           | jnp.where((here & LUT_HARD) == 0, jnp.uint16(LUT_HARD), jnp.uint16(0))
+           | jnp.where(((here & (LUT_INSCRIBED | LUT_LETHAL)) == 0) | inscribed_is_collision,
+                       jnp.uint16(LUT_INSCRIBED), jnp.uint16(0)))
+  seen = (jax.lax.reduce(code_mid, jnp.uint16(0), jax.lax.bitwise_or, (2,))
+          | jax.lax.reduce(code_end, jnp.uint16(0), jax.lax.bitwise_or, (2,)))
+  top = jnp.maximum(jnp.max(code_mid, axis=-1), jnp.max(code_end, axis=-1))
+  return (seen & rules) != 0, (top >> LUT_CLEARANCE_SHIFT).astype(jnp.int32).reshape(-1) / 252.0
+
+
+def _monitor(pose, others, others_valid, x, y, config: FleetConfig):
+  """Collision monitor against the nearest other robots' current positions.
+
+  Squared distances at every other rollout point (at most 0.1 m apart at 0.5 m/s),
+  ending at the last one.
+
+  Returns:
+    (approach bool [C]: the candidate comes too close to one of them; d2_end float32
+    [C, m] squared distance of the last point to each; neg float32 [m] minus the
+    squared distances now (-inf where fewer than m others); rel_near float32 [m, 2]).
+  """
+  p, r = config.planner, config.robot
+  c, t = x.shape[0] * x.shape[1], x.shape[-1]
   safe2 = (2.0 * r.radius + p.monitor_margin) ** 2
   rel_now = others - pose[None, :2]
   d2_now = jnp.where(others_valid, jnp.sum(rel_now * rel_now, axis=-1), jnp.inf)   # [K]
   m = min(_MONITORED, others.shape[0])
   neg, near = jax.lax.top_k(-d2_now, m)
-  rel_near = rel_now[near]                                       # [m, 2]
-  t = xy.shape[1] - 1
-  rel = xy[:, 2 - t % 2::2, None, :] - others[near][None, None]  # [C, ~T/2, m, 2], ends at T
-  d2_path = jnp.sum(rel * rel, axis=-1)                          # [C, T/2, m]
-  d2_min = jnp.min(d2_path, axis=1)                              # [C, m]
+  sel = slice(1 - t % 2, t, 2)                                   # points 2 - T % 2, ..., T (ends at T)
+  ox, oy = others[near, 0], others[near, 1]                       # [m]
+  # [m, Nv, Nw, ~T/2]: the points innermost, so the squares and the min run along contiguous memory.
+  dx = x[None, ..., sel] - ox[:, None, None, None]
+  dy = y[None, ..., sel] - oy[:, None, None, None]
+  d2_path = dx * dx + dy * dy
+  d2_min = jnp.min(d2_path, axis=-1).reshape(m, c).T             # [C, m]
+  d2_last = d2_path[..., -1].reshape(m, c).T
   approach = jnp.isfinite(neg)[None, :] & (d2_min < safe2) & (d2_min < -neg[None, :] - 1e-4)
-  collide = collide | jnp.any(approach, axis=1)
+  return jnp.any(approach, axis=1), d2_last, neg, rel_now[near]
 
-  # Speed-zone lookahead along each rollout: every interval's speed against the strictest
-  # (dilated) mask limit at its ends and midpoint; the first interval also under the limit in force.
-  cap = speed_cap_at(speed_cap, speed_mask.origin[0], speed_mask.resolution[0], xy)   # [C, T+1]
-  cap = cap.at[:, 0].min(limit_now)
-  cap_mid = speed_cap_at(speed_cap, speed_mask.origin[0], speed_mask.resolution[0], mids)  # [C, T]
-  interval_cap = jnp.minimum(jnp.minimum(cap[:, 1:], cap[:, :-1]), cap_mid)
-  interval_v = jnp.maximum(jnp.abs(v[:, 1:]), jnp.abs(v[:, :-1]))
-  # Integrated, not the worst interval: when the first interval is already too fast (a zone
-  # met at a shallow angle), candidates that brake still score better than those that do not.
-  violation = jnp.sum(jnp.maximum(interval_v - interval_cap, 0.0), axis=1) * p.rollout_dt
 
-  # Score.
-  reach = r.max_speed * p.horizon
-  start_val = navigation.nav_value(nav, goal, pose[:2])
-  end_val = jax.vmap(lambda q: navigation.nav_value(nav, goal, q))(xy[:, -1])
-  progress = (end_val - start_val) / reach
-  desired = jax.vmap(lambda q: navigation.descent_direction(nav, goal, q))(xy[:, -1])
-  heading = 0.5 * (1.0 - jnp.sum(head * desired, axis=1))
-  speed_term = 1.0 - targets[:, 0] / r.max_speed
-  # Right-hand traffic: with another robot ahead (within 2 m, +-45 deg), prefer turning right,
-  # so two robots meeting head-on both veer right instead of blocking each other.
-  c_yaw, s_yaw = jnp.cos(pose[2]), jnp.sin(pose[2])
-  ahead_x = c_yaw * rel_near[:, 0] + s_yaw * rel_near[:, 1]
-  ahead_y = -s_yaw * rel_near[:, 0] + c_yaw * rel_near[:, 1]
-  oncoming = jnp.any(jnp.isfinite(neg) & (ahead_x > 0) & (jnp.abs(ahead_y) < ahead_x)
-                     & (ahead_x * ahead_x + ahead_y * ahead_y < 4.0))
-  keep_right = jnp.where(
-      oncoming, p.keep_right_weight * jnp.maximum(targets[:, 1], 0.0) / r.max_yaw_rate, 0.0)
-  reverse = targets[:, 0] < 0
-  normal = (p.progress_weight * progress + p.heading_weight * heading + keep_right
-            + jnp.where(reverse, _REVERSE, 0.0))
-  # Recovery: back away from the nearest robot (reversing allowed), turning right.
-  d_end = jnp.sqrt(jnp.min(jnp.where(jnp.isfinite(neg)[None, :], d2_path[:, -1], jnp.inf), axis=1))
-  separation = -jnp.minimum(d_end, 2.0) / 2.0
-  recovery = 0.3 * p.progress_weight * progress + separation + 0.2 * targets[:, 1] / r.max_yaw_rate
-  score = (jnp.where(recovering, recovery, normal)
-           + p.clearance_weight * clearance + p.speed_weight * speed_term
-           + _SPEED_PENALTY * violation + jnp.where(collide, _COLLISION, 0.0))
-  return {"targets": targets, "xy": xy, "collide": collide, "violation": violation,
-          "progress": progress, "heading": heading, "clearance": clearance, "score": score}
+def _speed_lookahead(speed_cap, speed_mask, pose, limit_now, x, y, mx, my, v, config: FleetConfig):
+  """Excess speed integrated over each rollout (m/s x s), per candidate [C].
+
+  Every interval's speed against the strictest (dilated) mask limit at its ends and
+  midpoint; the first interval also under the limit in force. Integrated, not the
+  worst interval: when the first interval is already too fast (a zone met at a
+  shallow angle), candidates that brake still score better than those that do not.
+  """
+  nv, nw = x.shape[0], x.shape[1]
+  m_origin, m_res = speed_mask.origin[0], speed_mask.resolution[0]
+  cap0 = jnp.minimum(speed_cap_xy(speed_cap, m_origin, m_res, pose[0], pose[1]), limit_now)   # every start
+  cap_end = speed_cap_xy(speed_cap, m_origin, m_res, x, y)                         # [Nv, Nw, T]
+  cap_mid = speed_cap_xy(speed_cap, m_origin, m_res, mx, my)
+  cap_start = jnp.concatenate([jnp.broadcast_to(cap0, (nv, nw, 1)), cap_end[..., :-1]], axis=-1)
+  interval_cap = jnp.minimum(jnp.minimum(cap_end, cap_start), cap_mid)
+  interval_v = jnp.maximum(jnp.abs(v[:, 1:]), jnp.abs(v[:, :-1]))                 # [Nv, T]
+  excess = jnp.maximum(interval_v[:, None, :] - interval_cap, 0.0).reshape(nv * nw, -1)
+  return jnp.sum(excess, axis=1) * config.planner.rollout_dt
