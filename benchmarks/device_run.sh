@@ -49,7 +49,7 @@ if [ "${PROBES:-0}" = 1 ]; then
   echo "pallas_probe rc=$?"
   timeout 200 python3 benchmarks/prologue_probe.py --budget-s 150 --out "$OUT/prologue_probe.json" > /dev/null 2>> "$OUT/probes.stderr"
   echo "prologue_probe rc=$?"
-  timeout "${BREAKDOWN_TIMEOUT:-300}" python3 benchmarks/fleet_breakdown.py 65536 > "$OUT/fleet_breakdown.json" 2>> "$OUT/probes.stderr"
+  timeout 300 python3 benchmarks/fleet_breakdown.py 65536 --time-budget "${BREAKDOWN_BUDGET:-240}" > "$OUT/fleet_breakdown.json" 2>> "$OUT/probes.stderr"
   echo "fleet_breakdown rc=$?"
 fi
 
