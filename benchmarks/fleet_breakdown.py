@@ -115,9 +115,9 @@ class VariantEnv(FleetEnv):
     k = self.num_robots
     return jnp.broadcast_to(jnp.asarray(_TWIST, _F32), (k, 2)), jnp.zeros((k,), bool)
 
-  def _physics(self, s: WorldState, v, w) -> WorldState:
+  def _physics(self, s: WorldState, v, w, t0) -> WorldState:
     if self.metrics:
-      return super()._physics(s, v, w)
+      return super()._physics(s, v, w, t0)
 
     def substep(data, _):
       th = data.qpos[:, 2]
