@@ -81,16 +81,7 @@ def expansion_sign(terms: Sequence[jax.Array]) -> jax.Array:
   ordered by magnitude, so the sign of the sum is the sign of the largest
   non-zero component.
   """
-  terms = [jnp.asarray(t, _F32) for t in terms]
-  expansion = [terms[0]]
-  for t in terms[1:]:
-    q = t
-    grown = []
-    for comp in expansion:
-      q, h = two_sum(q, comp)
-      grown.append(h)
-    grown.append(q)
-    expansion = grown
+  expansion = _expansion([jnp.asarray(t, _F32) for t in terms])
   sign = jnp.zeros(jnp.shape(expansion[0]), jnp.int32)
   for comp in expansion:
     sign = jnp.where(comp != 0, jnp.sign(comp).astype(jnp.int32), sign)
