@@ -57,7 +57,9 @@ from jaxfilters import geometry
 from jaxfilters import keepout as ko
 from jaxfilters.grid import OccupancyGrid
 
-RES = 0.05
+from benchmarks.run import RES as BENCH_RES, turned_windows
+
+RES = BENCH_RES            # the benchmark harness's costmap resolution (turned_windows uses it)
 PLAIN = ko.KeepoutConfig()
 ESCAPE = ko.KeepoutConfig(override_lethal_cost=True, lethal_override_cost=200)
 
@@ -93,12 +95,7 @@ def fleet(seed, b, hw, n, mask_res, transform):
   cm = dataclasses.replace(geo, cost=cost)
   tf = None
   if transform:
-    yaw = rng.uniform(-np.pi, np.pi, b)
-    centre = origin.astype(np.float64) + 0.5 * hw * RES
-    c, s = np.cos(yaw), np.sin(yaw)
-    turned = np.stack([c * centre[:, 0] - s * centre[:, 1], s * centre[:, 0] + c * centre[:, 1]], 1)
-    shift = centre + rng.uniform(-1, 1, (b, 2)) - turned
-    tf = jnp.asarray(np.concatenate([shift, yaw[:, None]], 1).astype(np.float32))
+    tf = turned_windows(rng, origin, hw)
   state = ko._fill_error(jf.KeepoutState.create(b), b)
   idx, ok, _, en, win, tf = ko._batched_inputs(cm, mask, jnp.zeros((b, 3)), None, None, None, tf, "probe")
   return cm, mask, idx, ok, state, win, en, tf

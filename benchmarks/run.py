@@ -120,13 +120,20 @@ def keepout_inputs(seed, b, hw, n, mask_res, transform):
     # T_mask_from_global turns each window about its centre by any yaw and shifts it by up to
     # 1 m, so the rotated window still lies over the mask (a turn about the world origin, as
     # before 2026-11-23, put 3/4 of the cells off the mask, where a per-cell loop stops early).
-    yaw = rng.uniform(-np.pi, np.pi, b)
-    centre = origin.astype(np.float64) + 0.5 * hw * RES
-    c, s = np.cos(yaw), np.sin(yaw)
-    turned = np.stack([c * centre[:, 0] - s * centre[:, 1], s * centre[:, 0] + c * centre[:, 1]], 1)
-    shift = centre + rng.uniform(-1, 1, (b, 2)) - turned
-    tf = jnp.asarray(np.concatenate([shift, yaw[:, None]], 1).astype(np.float32))
+    tf = turned_windows(rng, origin, hw)
   return cm, mask, tf
+
+
+def turned_windows(rng, origin, hw):
+  """float32 [B, 3] T_mask_from_global turning each hw x hw window (lower-left corner `origin`
+  [B, 2], cells of RES) about its centre by a random yaw and shifting it by up to 1 m."""
+  b = origin.shape[0]
+  yaw = rng.uniform(-np.pi, np.pi, b)
+  centre = origin.astype(np.float64) + 0.5 * hw * RES
+  c, s = np.cos(yaw), np.sin(yaw)
+  turned = np.stack([c * centre[:, 0] - s * centre[:, 1], s * centre[:, 0] + c * centre[:, 1]], 1)
+  shift = centre + rng.uniform(-1, 1, (b, 2)) - turned
+  return jnp.asarray(np.concatenate([shift, yaw[:, None]], 1).astype(np.float32))
 
 
 def point_mask(seed, n, ftype, values):
