@@ -56,20 +56,20 @@ def _fast_equals_exact(case, transform=None, configs=(PLAIN, ESCAPE), loops=("ma
   return want[0]
 
 
-def _fleet(rng, res, mres, origins, mask_origins, *, windows=None):
-  """B costmaps at `origins` [B, 2] (float64), M masks at `mask_origins` [M, 2]."""
+def _fleet(rng, res, mres, origins, mask_origins, *, windows=None, b=B):
+  """b costmaps at `origins` [b, 2] (float64), M masks at `mask_origins` [M, 2]."""
   data = rng.choice([-1, 0, 0, 1, 25, 50, 75, 99, 100, 100, 101, -128], (M, HM, WM)).astype(np.int8)
   grids = [OccupancyGrid.create(np.clip(d, -1, 100), float(mres), tuple(o)) for d, o in zip(data, mask_origins)]
   mask = FilterMask.create(grids, KEEPOUT).with_data(data)
-  cost = rng.choice([0, 0, 10, 100, 200, 252, 253, 254, 255], (B, H, W)).astype(np.uint8)
+  cost = rng.choice([0, 0, 10, 100, 200, 252, 253, 254, 255], (b, H, W)).astype(np.uint8)
   cm = Costmap.create(cost, np.asarray(origins, np.float64), res)
   if windows is None:
-    x0, y0 = rng.integers(-2, W // 2, B), rng.integers(-2, H // 2, B)
-    windows = np.stack([x0, y0, x0 + rng.integers(1, W + 3, B), y0 + rng.integers(1, H + 3, B)], 1)
+    x0, y0 = rng.integers(-2, W // 2, b), rng.integers(-2, H // 2, b)
+    windows = np.stack([x0, y0, x0 + rng.integers(1, W + 3, b), y0 + rng.integers(1, H + 3, b)], 1)
     windows[0] = (0, 0, W, H)
-  state = dataclasses.replace(ko.KeepoutState.create(B), is_pose_lethal=jnp.asarray(rng.random(B) < 0.5))
-  enabled = jnp.asarray(rng.random(B) < 0.9).at[0].set(True)
-  return cm, mask, state, np.asarray(windows, np.int32), rng.integers(0, M, B).astype(np.int32), enabled
+  state = dataclasses.replace(ko.KeepoutState.create(b), is_pose_lethal=jnp.asarray(rng.random(b) < 0.5))
+  enabled = jnp.asarray(rng.random(b) < 0.9).at[0].set(True)
+  return cm, mask, state, np.asarray(windows, np.int32), rng.integers(0, M, b).astype(np.int32), enabled
 
 
 def _nudge(x, steps):

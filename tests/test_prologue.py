@@ -27,11 +27,12 @@ import pytest
 from jaxfilters import geometry
 from jaxfilters import keepout as ko
 from jaxfilters import keepout_pallas as kp
-from jaxfilters.grid import OccupancyGrid
 from jaxfilters.keepout_pallas import PallasTuning
-from jaxfilters.types import Costmap, FilterInfo, FilterMask
+from tests import test_keepout_paths as keepout_paths
 
-B, H, W, M, HM, WM = 8, 12, 16, 2, 20, 18
+B = 8
+# The shapes of test_keepout_paths, whose fleet builder this file uses.
+H, W, M, HM, WM = keepout_paths.H, keepout_paths.W, keepout_paths.M, keepout_paths.HM, keepout_paths.WM
 PLAIN = ko.KeepoutConfig()
 PALLAS = ko.KeepoutConfig(kernel="pallas", pallas=PallasTuning(interpret=True))
 
@@ -45,23 +46,14 @@ def _nudge(x, steps):
 
 
 def _fleet(rng, res, mres, origins, mask_origins, *, windows=None):
-  """B costmaps at `origins` [B, 2] (float64: carried as float32 parts), M masks at `mask_origins`."""
-  data = rng.choice([-1, 0, 0, 1, 25, 50, 75, 99, 100, 100, 101, -128], (M, HM, WM)).astype(np.int8)
-  grids = [OccupancyGrid.create(np.clip(d, -1, 100), float(mres), tuple(o)) for d, o in zip(data, mask_origins)]
-  mask = FilterMask.create(grids, FilterInfo.create(0)).with_data(data)
-  cost = rng.choice([0, 0, 10, 100, 200, 252, 253, 254, 255], (B, H, W)).astype(np.uint8)
-  cm = Costmap.create(cost, np.asarray(origins, np.float64), res)
-  if windows is None:
-    x0, y0 = rng.integers(-2, W // 2, B), rng.integers(-2, H // 2, B)
-    windows = np.stack([x0, y0, x0 + rng.integers(1, W + 3, B), y0 + rng.integers(1, H + 3, B)], 1)
-    windows[0] = (0, 0, W, H)
-  state = dataclasses.replace(ko.KeepoutState.create(B), is_pose_lethal=jnp.asarray(rng.random(B) < 0.5))
-  enabled = jnp.asarray(rng.random(B) < 0.9).at[0].set(True)
+  """test_keepout_paths' fleet of B robots, with zero lower parts where the geometry is exactly float32."""
+  cm, mask, state, windows, idx, enabled = keepout_paths._fleet(rng, res, mres, origins, mask_origins,
+                                                                windows=windows, b=B)
   # Zero lower parts where the geometry is exactly float32 (same sums): one pytree layout, one compile.
   z = lambda a, shape: jnp.zeros(shape, jnp.float32) if a is None else a
   cm = dataclasses.replace(cm, origin_lo=z(cm.origin_lo, (B, 2, 2)), resolution_lo=z(cm.resolution_lo, (B, 2)))
   mask = dataclasses.replace(mask, origin_lo=z(mask.origin_lo, (M, 2, 2)))
-  return cm, mask, state, np.asarray(windows, np.int32), rng.integers(0, M, B).astype(np.int32), enabled
+  return cm, mask, state, windows, idx, enabled
 
 
 def _cases():
