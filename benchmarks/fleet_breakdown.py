@@ -45,7 +45,7 @@ from pathlib import Path
 if __package__ in (None, ""):
   sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
-from sims import xla_flags  # noqa: E402
+from jaxfilters import xla_flags  # noqa: E402
 
 xla_flags.use_fast_cpu_compile()
 
@@ -170,13 +170,13 @@ _LOOKUPS = {
     "nav": [(navigation, "nav_value", _const_nav_value), (navigation, "descent_direction", _const_descent),
             (navigation, "value_and_direction", _const_value_and_direction)],
     # Not lookups: the two ways sims/planner.py can sum the rollouts (its default depends on the backend).
-    "rollout_cumsum": [(planner, "_rollout_mode", lambda: "cumsum")],
-    "rollout_chain": [(planner, "_rollout_mode", lambda: "chain")],
+    "rollout_cumsum": [(planner, "rollout_mode", lambda: "cumsum")],
+    "rollout_chain": [(planner, "rollout_mode", lambda: "chain")],
 }
 
 
 @contextlib.contextmanager
-def _patched(kinds):
+def patched_lookups(kinds):
   saved, missing = [], []
   try:
     for kind in kinds:
@@ -234,7 +234,7 @@ def run_variant(name: str, spec, num_robots: int, num_steps: int, repeats: int) 
   env_steps = -(-num_steps // per_env_step)
   physics_steps = env_steps * per_env_step
   env = dataclasses.replace(VariantEnv.create(config=config), **fields)
-  with _patched(lookups) as missing:
+  with patched_lookups(lookups) as missing:
     timed = bench.time_rollout(env, num_worlds, env_steps, repeats=repeats)
   rate = num_robots * physics_steps / timed["run_s"]
   out = {"robot_steps_per_s": rate, "robot_seconds_per_s": rate * config.physics_dt,

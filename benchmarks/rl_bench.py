@@ -30,7 +30,7 @@ import math
 import sys
 import time
 
-from sims import xla_flags
+from jaxfilters import xla_flags
 
 xla_flags.use_fast_cpu_compile()
 

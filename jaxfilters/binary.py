@@ -18,13 +18,13 @@ import jax.numpy as jnp
 from jaxfilters import constants
 from jaxfilters import geometry
 from jaxfilters import validate
-from jaxfilters.speed import _exact_sign_affine, _mask_leaves, _transform_point
-from jaxfilters.types import FilterMask, _dataclass, robot_inputs
+from jaxfilters.speed import exact_sign_affine, mask_leaves, transform_point
+from jaxfilters.types import FilterMask, pytree_dataclass, robot_inputs
 
 _F32 = jnp.float32
 
 
-@_dataclass
+@pytree_dataclass
 class BinaryState:
   """Per-robot BinaryFilter state: `binary_state` bool [B]."""
   binary_state: jax.Array
@@ -35,7 +35,7 @@ class BinaryState:
     return cls(jnp.zeros((num_robots,), bool))
 
 
-@_dataclass
+@pytree_dataclass
 class BinaryResult:
   """One BinaryFilter cycle per robot.
 
@@ -56,13 +56,13 @@ def binary_filter_one(state, data, mask_origin, mask_res, info, pose, default_st
                       flip_threshold, enabled, transform):
   """BinaryFilter::process for one robot (scalar leaves; see module docstring)."""
   hm, wm = data.shape
-  xy = pose[:2] if transform is None else _transform_point(transform, pose[:2])
+  xy = pose[:2] if transform is None else transform_point(transform, pose[:2])
   mx, my, inside = geometry.world_to_cell(xy[0], xy[1], mask_origin, mask_res, wm, hm)
   d = data[my, mx].astype(jnp.int32)
   # A mask of another type is never subscribed in Nav2: the filter does nothing.
   active = enabled & (info.type == constants.BINARY_FILTER)
   known = inside & (d != constants.OCC_GRID_UNKNOWN)
-  above = _exact_sign_affine(d, info.multiplier, info.base, flip_threshold) > 0
+  above = exact_sign_affine(d, info.multiplier, info.base, flip_threshold) > 0
   target = jnp.where(above, ~default_state, default_state)
   s = state.binary_state
   new = jnp.where(inside, jnp.where(known, target, s), default_state)
@@ -114,7 +114,7 @@ def binary_filter(mask: FilterMask, poses, state: BinaryState, *, default_state=
 def _binary_jit(mask, poses, state, default_state, flip_threshold, idx, idx_ok, enabled, transform):
   with jax.named_scope("binary_filter"):
     def one(st, i, ok, pose, ds, thr, en, tf):
-      new, out = binary_filter_one(st, *_mask_leaves(mask, i), pose, ds, thr, en, tf)
+      new, out = binary_filter_one(st, *mask_leaves(mask, i), pose, ds, thr, en, tf)
       kept = jax.tree.map(lambda a, b: jnp.where(ok, a, b), new, st)
       out = BinaryResult(kept.binary_state, out.published & ok, out.in_mask & ok, ~ok)
       return kept, out

@@ -29,7 +29,7 @@ import os
 import sys
 import traceback
 
-from jaxfilters import _xla_flags
+from jaxfilters import xla_flags
 from jaxfilters._version import __version__
 
 ENTRY_POINT_GROUP = "jaxfilters.commands"
@@ -96,7 +96,7 @@ def build_parser() -> ArgumentParser:
 def main(argv=None) -> int:
   """Entry point of the `jaxfilters` console script; returns the exit code."""
   argv = list(sys.argv[1:] if argv is None else argv)
-  _xla_flags.use_fast_cpu_compile()   # before any JAX backend starts
+  xla_flags.use_fast_cpu_compile()   # before any JAX backend starts
   parser = build_parser()
   try:
     args, extra = parser.parse_known_args(argv)

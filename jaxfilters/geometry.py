@@ -116,7 +116,7 @@ def expansion_sign_rolled(terms: Sequence[jax.Array]) -> jax.Array:
   return sign
 
 
-def _as_terms(res) -> list[jax.Array]:
+def as_terms(res) -> list[jax.Array]:
   if isinstance(res, (list, tuple)):
     return [jnp.asarray(r, _F32) for r in res]
   return [jnp.asarray(res, _F32)]
@@ -132,7 +132,7 @@ def floor_div_exact(num_terms: Sequence[jax.Array], res, *, sign_fn=expansion_si
   `expansion_sign_rolled` (same results, far less to compile, slower to run).
   """
   num_terms = [jnp.asarray(t, _F32) for t in num_terms]
-  res_terms = _as_terms(res)
+  res_terms = as_terms(res)
   shape = jnp.broadcast_shapes(*[r.shape for r in res_terms], *[t.shape for t in num_terms])
   num_terms = [jnp.broadcast_to(t, shape) for t in num_terms]
   res_terms = [jnp.broadcast_to(r, shape) for r in res_terms]
@@ -211,7 +211,7 @@ def world_to_cell(wx: jax.Array, wy: jax.Array, origin, resolution: jax.Array,
   wx = jnp.asarray(wx, _F32)
   wy = jnp.asarray(wy, _F32)
   wx, wy = jnp.broadcast_arrays(wx, wy)
-  parts = _as_terms(origin)
+  parts = as_terms(origin)
   if origin_lo is not None:
     parts += origin_terms(parts[0], origin_lo)[1:]
   o_terms = [-jnp.stack([jnp.broadcast_to(t[0], wx.shape), jnp.broadcast_to(t[1], wx.shape)])
@@ -233,8 +233,8 @@ def cell_centre_terms(index: jax.Array, origin, resolution) -> list[jax.Array]:
   `origin` and `resolution` are float32 arrays or lists of parts (host doubles).
   """
   half_steps = 2.0 * jnp.asarray(index, _F32) + 1.0      # exact for index < 2**23
-  terms = list(_as_terms(origin))
-  for r in _as_terms(resolution):
+  terms = list(as_terms(origin))
+  for r in as_terms(resolution):
     terms += exact_product(half_steps, 0.5 * r)
   return terms
 
@@ -264,9 +264,9 @@ def centres_to_cells_2d(shape: tuple[int, int], origin, resolution,
   i = jnp.arange(n, dtype=_F32)
   idx = jnp.stack([i, i])
   per_axis = lambda o: jnp.stack([jnp.full((n,), o[0], _F32), jnp.full((n,), o[1], _F32)])
-  o = [per_axis(t) for t in _as_terms(origin)]
-  res = [jnp.broadcast_to(r, idx.shape) for r in _as_terms(resolution)]
-  terms = cell_centre_terms(idx, o, res) + [-per_axis(t) for t in _as_terms(target_origin)]
+  o = [per_axis(t) for t in as_terms(origin)]
+  res = [jnp.broadcast_to(r, idx.shape) for r in as_terms(resolution)]
+  terms = cell_centre_terms(idx, o, res) + [-per_axis(t) for t in as_terms(target_origin)]
   cells = floor_div_exact(terms, target_resolution, sign_fn=sign_fn)
   nonneg = sign_fn(terms) >= 0
   size = jnp.asarray([[wt], [ht]], jnp.int32)
@@ -353,7 +353,7 @@ def centre_floor_bracket(index: jax.Array, origin, resolution, target_origin, ta
   Returns:
     (lo, hi) float32 floors, lo <= exact floor <= hi; the floor is known where lo == hi.
   """
-  o, r, t = _as_terms(origin), _as_terms(resolution), _as_terms(target_origin)
+  o, r, t = as_terms(origin), as_terms(resolution), as_terms(target_origin)
   h = jnp.asarray(index, _F32) + 0.5
   p = h * r[0]
   a = o[0] - t[0]
@@ -370,7 +370,7 @@ def _floor_checked(x, origin, resolution, size: int):
   """`floor_div_checked` before clipping: (k float32, inside, certain); see there."""
   if not 0 < size <= 2 ** 17:
     raise ValueError(f"floor_div_checked needs 0 < size <= 2**17; got {size}")
-  parts = _as_terms(origin)
+  parts = as_terms(origin)
   r = jnp.asarray(resolution, _F32)
   x = jnp.asarray(x, _F32)
   s, e = two_sum(x, -parts[0])
@@ -443,7 +443,7 @@ def world_to_cell_checked(wx: jax.Array, wy: jax.Array, origin, resolution, widt
     wx, wy: float32 arrays of one shape. origin: float32 [2] or a list of [2] parts.
     resolution: float32 scalar. width, height: static grid size, each <= 2**17.
   """
-  parts = _as_terms(origin)
+  parts = as_terms(origin)
   mx, vx, cx = floor_div_checked(wx, [p[0] for p in parts], resolution, width)
   my, vy, cy = floor_div_checked(wy, [p[1] for p in parts], resolution, height)
   return mx, my, vx & vy, (cx & cy) | (cx & ~vx) | (cy & ~vy)
@@ -460,7 +460,7 @@ def world_to_index_checked(wx: jax.Array, wy: jax.Array, origin, resolution, wid
   """
   if width * height >= 2 ** 24:
     raise ValueError(f"world_to_index_checked needs width * height < 2**24; got {width} x {height}")
-  parts = _as_terms(origin)
+  parts = as_terms(origin)
   kx, vx, cx = _floor_checked(wx, [p[0] for p in parts], resolution, width)
   ky, vy, cy = _floor_checked(wy, [p[1] for p in parts], resolution, height)
   valid = vx & vy
@@ -557,7 +557,7 @@ def edge_thresholds(origin, resolution, size: int) -> tuple[jax.Array, jax.Array
   """
   if not 0 < size < 2 ** 24:
     raise ValueError(f"edge_thresholds needs 0 < size < 2**24; got {size}")
-  parts = [jnp.asarray(t, _F32) for t in _as_terms(origin)]
+  parts = [jnp.asarray(t, _F32) for t in as_terms(origin)]
   r = jnp.asarray(resolution, _F32)
   shape = jnp.broadcast_shapes(r.shape, *[p.shape for p in parts])
   parts = [jnp.broadcast_to(p, shape)[..., None] for p in parts]

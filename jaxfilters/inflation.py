@@ -244,7 +244,7 @@ class InflationConfig:
   @property
   def cost_lut(self) -> np.ndarray:
     """uint8 [R*100 + 2] (read-only): Nav2's `cost_lut_`, LUT[k] = computeCost(k / 100)."""
-    return _tables(self)[0]
+    return cost_tables(self)[0]
 
 
 def compute_cost(distance: float, *, config: InflationConfig) -> int:
@@ -271,7 +271,7 @@ def compute_cost(distance: float, *, config: InflationConfig) -> int:
 
 
 @functools.lru_cache(maxsize=64)
-def _tables(config: InflationConfig) -> tuple[np.ndarray, np.ndarray, int]:
+def cost_tables(config: InflationConfig) -> tuple[np.ndarray, np.ndarray, int]:
   """(cost_lut, cost_by_sq, max_sq_written) for one config, on the host.
 
   cost_by_sq[s] is the cost Nav2 writes at squared distance s (for s <=
@@ -299,7 +299,7 @@ def _tables(config: InflationConfig) -> tuple[np.ndarray, np.ndarray, int]:
 # Device kernels.
 
 
-def _squared_distance(src: jax.Array, r: int, dtype) -> jax.Array:
+def squared_distance(src: jax.Array, r: int, dtype) -> jax.Array:
   """Exact squared distance in cells to the nearest True of src, capped at (R+1)^2.
 
   Args:
@@ -355,12 +355,12 @@ def inflate_one(cost: jax.Array, *, config: InflationConfig) -> jax.Array:
   r = config.cell_radius
   if not config.enabled or r == 0:
     return cost
-  _, cost_by_sq, max_sq = _tables(config)
+  _, cost_by_sq, max_sq = cost_tables(config)
   src = cost == constants.LETHAL_OBSTACLE
   if config.inflate_around_unknown:
     src = src | (cost == constants.NO_INFORMATION)
   dtype = jnp.int16 if (r + 1) ** 2 + r * r <= np.iinfo(np.int16).max else jnp.int32
-  sq = _squared_distance(src, r, dtype).astype(jnp.int32)
+  sq = squared_distance(src, r, dtype).astype(jnp.int32)
   new = jnp.asarray(cost_by_sq)[sq]
   unknown = cost == constants.NO_INFORMATION
   if config.inflate_unknown:

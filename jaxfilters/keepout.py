@@ -59,7 +59,7 @@ from jaxfilters import footprint as footprint_lib
 from jaxfilters import geometry
 from jaxfilters import keepout_pallas
 from jaxfilters.keepout_pallas import PallasTuning
-from jaxfilters.types import Costmap, FilterMask, _dataclass, check_costmap, per_robot_bool, robot_inputs
+from jaxfilters.types import Costmap, FilterMask, pytree_dataclass, check_costmap, per_robot_bool, robot_inputs
 
 _F32 = jnp.float32
 _EMPTY_BOX = (np.inf, np.inf, -np.inf, -np.inf)
@@ -164,7 +164,7 @@ class KeepoutConfig:
       object.__setattr__(self, name, value)
 
 
-@_dataclass
+@pytree_dataclass
 class KeepoutState:
   """Per-robot state KeepoutFilter carries between cycles.
 
@@ -295,8 +295,8 @@ def _same_frame_window(shape_m, mask_origin, mask_res, origin, res, window):
   half = 0.5 * mask_res
   min_i, min_j, max_i, max_j = window[0], window[1], window[2], window[3]
   four = lambda o: jnp.stack([o[0], o[1], o[0], o[1]])
-  mo = [four(t) for t in geometry._as_terms(mask_origin)]
-  o = [-four(t) for t in geometry._as_terms(origin)]
+  mo = [four(t) for t in geometry.as_terms(mask_origin)]
+  o = [-four(t) for t in geometry.as_terms(origin)]
   extent = jnp.asarray([0.0, 0.0, wm, hm], _F32)       # corners (0, 0) and (Wm, Hm)
   g = geometry.trunc_div_exact([*mo, *geometry.exact_product(extent, mask_res), half, *o], res,
                                sign_fn=geometry.expansion_sign_rolled)
@@ -325,7 +325,7 @@ def _se2_axes_one(origin, res, transform, h, w):
     (xc, xs float32 [W]: c cx and s cx; yc, ys float32 [H]: c cy and s cy; t float32 [2]),
     with c, s the float32 cos and sin of the yaw.
   """
-  to, tr = geometry._as_terms(origin), geometry._as_terms(res)
+  to, tr = geometry.as_terms(origin), geometry.as_terms(res)
   o = sum(to[1:], to[0])
   r = sum(tr[1:], tr[0])
   cx = o[0] + geometry.rounded_product(jnp.arange(w, dtype=jnp.int32).astype(_F32) + 0.5, r)
@@ -466,9 +466,9 @@ def _axis_cells(shape, origin, res, mask_origin, mask_res, mshape):
   n = max(h, w)
   i = jnp.arange(n, dtype=_F32)
   per_axis = lambda o: jnp.stack([jnp.full((n,), o[0], _F32), jnp.full((n,), o[1], _F32)])
-  lo, hi = geometry.centre_floor_bracket(jnp.stack([i, i]), [per_axis(t) for t in geometry._as_terms(origin)],
-                                         geometry._as_terms(res),
-                                         [per_axis(t) for t in geometry._as_terms(mask_origin)], mask_res)
+  lo, hi = geometry.centre_floor_bracket(jnp.stack([i, i]), [per_axis(t) for t in geometry.as_terms(origin)],
+                                         geometry.as_terms(res),
+                                         [per_axis(t) for t in geometry.as_terms(mask_origin)], mask_res)
   size = jnp.asarray([[wm], [hm]], _F32)
   known = (lo == hi) | (hi < 0) | (lo >= size)          # an exact floor, or surely off the mask
   cells = jnp.clip(jnp.where(known, lo, 0.0), 0, size - 1).astype(jnp.int32)
@@ -514,9 +514,9 @@ def _same_frame_window_fast(shape_m, mask_origin, mask_res, origin, res, window)
   """
   hm, wm = shape_m
   four = lambda o: jnp.stack([o[0], o[1], o[0], o[1]])
-  mo = [four(t) for t in geometry._as_terms(mask_origin)]
-  o = [four(t) for t in geometry._as_terms(origin)]
-  r = geometry._as_terms(res)
+  mo = [four(t) for t in geometry.as_terms(mask_origin)]
+  o = [four(t) for t in geometry.as_terms(origin)]
+  r = geometry.as_terms(res)
   u = 2.0 ** -24
   e = jnp.asarray([0.0, 0.0, wm, hm], _F32) * mask_res
   c1 = mo[0] + e
@@ -638,8 +638,8 @@ def _slice_test_one(shape, origin, res, mask_origin, mask_res, mshape, box, *, e
   size = jnp.asarray([wm, hm], jnp.int32)
   ends, empty = _slice_ends(shape, box)
   col = lambda t: jnp.asarray(t, _F32)[:, None]
-  o = [col(t) for t in geometry._as_terms(origin)]
-  mo = [col(t) for t in geometry._as_terms(mask_origin)]
+  o = [col(t) for t in geometry.as_terms(origin)]
+  mo = [col(t) for t in geometry.as_terms(mask_origin)]
   idx = ends.astype(_F32)
   if exact:
     terms = geometry.cell_centre_terms(idx, o, res) + [-t for t in mo]

@@ -73,7 +73,7 @@ from jaxfilters.binary import BinaryResult, BinaryState, binary_filter
 from jaxfilters.keepout import KeepoutConfig, occ_to_cost
 from jaxfilters.map_io import load_map
 from jaxfilters.speed import LookaheadConfig, SpeedResult, SpeedState, speed_filter
-from jaxfilters.types import FilterInfo, FilterMask, _dataclass, check_poses
+from jaxfilters.types import FilterInfo, FilterMask, pytree_dataclass, check_poses
 from jaxfilters.zone import NUM_ZONES, ZoneResult, ZoneState, ZoneTable, zone_filter
 
 KEEPOUT_PLUGIN = "nav2_costmap_2d::KeepoutFilter"
@@ -243,7 +243,7 @@ class Nav2ZoneFilter(Nav2Filter):
   state_event_topic: str | None
 
 
-@_dataclass
+@pytree_dataclass
 class Nav2Readout:
   """What each enabled filter of a costmap gives on a fresh robot's first cycle, per pose.
 

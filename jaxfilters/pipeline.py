@@ -33,7 +33,7 @@ from jaxfilters import validate
 from jaxfilters.keepout import KeepoutConfig, KeepoutState, keepout_filter, keepout_update_bounds
 from jaxfilters.speed import SpeedResult, SpeedState, speed_filter
 from jaxfilters.static_layer import StaticLayerConfig, static_layer
-from jaxfilters.types import Costmap, FilterMask, _dataclass
+from jaxfilters.types import Costmap, FilterMask, pytree_dataclass
 
 
 @dataclasses.dataclass(frozen=True)
@@ -60,7 +60,7 @@ class LayersConfig:
       raise ValueError(f"keepout must be a KeepoutConfig; got {type(self.keepout).__name__}")
 
 
-@_dataclass
+@pytree_dataclass
 class PipelineOutput:
   """One costmap cycle.
 

@@ -38,7 +38,7 @@ import numpy as np
 
 from jaxfilters import constants, geometry
 from jaxfilters.keepout import occ_to_cost
-from jaxfilters.speed import _exact_sign_affine, speed_limit_at_one
+from jaxfilters.speed import exact_sign_affine, speed_limit_at_one
 from jaxfilters.types import FilterMask
 from jaxfilters.validate import F32_TINY, float32_values, short_repr
 
@@ -237,7 +237,7 @@ def _binary(mask: FilterMask, pts, idx, default_state, flip_threshold):
     d, inside, j, _ = _cell(mask, i, xy)
     typed = mask.info.type[j] == constants.BINARY_FILTER
     valid = inside & typed & (d != constants.OCC_GRID_UNKNOWN)
-    above = _exact_sign_affine(d, mask.info.multiplier[j], mask.info.base[j], flip_threshold) > 0
+    above = exact_sign_affine(d, mask.info.multiplier[j], mask.info.base[j], flip_threshold) > 0
     return jnp.where(valid & above, ~default_state, default_state), valid
   return jax.vmap(one)(pts, idx)
 

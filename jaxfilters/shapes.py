@@ -68,7 +68,7 @@ from jax import lax
 
 from jaxfilters import constants
 from jaxfilters import geometry
-from jaxfilters.types import FilterMask, _dataclass
+from jaxfilters.types import FilterMask, pytree_dataclass
 from jaxfilters.validate import float32_values, short_repr
 
 _F32 = jnp.float32
@@ -165,7 +165,7 @@ def _circle_arrays(circle: Circle, owner: str):
   return c, np.float32(r), _value(circle.value, owner)
 
 
-@_dataclass
+@pytree_dataclass
 class Shapes:
   """A fixed number of polygon and circle slots (add, move, remove: no recompile).
 
@@ -355,7 +355,7 @@ def check_overlay_params(default_value, overlay_type) -> None:
                      f"got {short_repr(overlay_type)}")
 
 
-@_dataclass
+@pytree_dataclass
 class RasterResult:
   """A rasterised mask and whether it is exact.
 
@@ -721,7 +721,7 @@ def rasterize_one(shapes: Shapes, origin, resolution, default_value=constants.OC
   return RasterResult(data.astype(jnp.int8), valid)
 
 
-def _check_shapes(shapes: Shapes, batch: int | None):
+def check_shapes(shapes: Shapes, batch: int | None):
   if not isinstance(shapes, Shapes):
     raise TypeError(f"shapes must be a jaxfilters.shapes.Shapes (see Shapes.create); got {type(shapes).__name__}")
   lead = () if batch is None else (batch,)
@@ -756,18 +756,18 @@ def _rasterize(shapes, origin, resolution, default_value, overlay_type, *, shape
       raise ValueError(f"{name} must be an integer scalar; got {a.dtype}{tuple(a.shape)}")
   origin, resolution = origin.astype(_F32), resolution.astype(_F32)
   if origin.shape == (2,) and resolution.shape == ():
-    _check_shapes(shapes, None)
+    check_shapes(shapes, None)
     return rasterize_one(shapes, origin, resolution, default_value, overlay_type, shape=shape)
   if origin.ndim != 2 or origin.shape[1] != 2 or resolution.shape != origin.shape[:1]:
     raise ValueError(f"origin and resolution must be [2] and [] (one grid) or [M, 2] and [M]; "
                      f"got {tuple(origin.shape)} and {tuple(resolution.shape)}")
   m = origin.shape[0]
   if shapes.vertices.ndim == 4:
-    _check_shapes(shapes, m)
+    check_shapes(shapes, m)
   else:
     # Shared shapes: broadcast (they are small) so stacks with and without per-grid
     # shapes run one program.
-    _check_shapes(shapes, None)
+    check_shapes(shapes, None)
     shapes = jax.tree.map(lambda x: jnp.broadcast_to(x, (m, *x.shape)), shapes)
   kernel = functools.partial(rasterize_one, shape=shape)
   return jax.vmap(kernel, in_axes=(0, 0, 0, None, None))(shapes, origin, resolution, default_value,

@@ -38,7 +38,7 @@ import jax.numpy as jnp
 import numpy as np
 
 from jaxfilters import constants
-from jaxfilters.shapes import OVERLAY_MAX, OVERLAY_MIN, OVERLAY_SEQ, Shapes, _check_shapes
+from jaxfilters.shapes import OVERLAY_MAX, OVERLAY_MIN, OVERLAY_SEQ, Shapes, check_shapes
 from jaxfilters.types import FilterInfo
 from jaxfilters.validate import float32_values, short_repr
 
@@ -158,7 +158,7 @@ def signed_distance(shapes: Shapes, points) -> jax.Array:
   Raises:
     ValueError: points not [N, 2] floats; Shapes leaves of the wrong shape.
   """
-  _check_shapes(shapes, None)
+  check_shapes(shapes, None)
   return _signed_distance(shapes, _check_points(points))
 
 
@@ -240,7 +240,7 @@ def soft_keepout_cost(shapes: Shapes, points, *, width, margin=0.0,
   """
   _check_overlay(overlay_type, (OVERLAY_SEQ, OVERLAY_MAX))
   _check_width(width, margin)
-  _check_shapes(shapes, None)
+  check_shapes(shapes, None)
   if not isinstance(default_value, jax.core.Tracer) and not (
       isinstance(default_value, (int, np.integer)) and -1 <= int(default_value) <= 100):
     raise ValueError(f"default_value must be an integer in -1..100; got {short_repr(default_value)}")
@@ -321,7 +321,7 @@ def soft_speed_limit(shapes: Shapes, info: FilterInfo, points, *, width, no_limi
       wrong shape, default_value out of range.
   """
   _check_width(width, margin)
-  _check_shapes(shapes, None)
+  check_shapes(shapes, None)
   if not isinstance(info, FilterInfo):
     raise ValueError(f"info must be a FilterInfo; got {type(info).__name__}")
   if not isinstance(info.type, jax.core.Tracer) and int(info.type) not in (

@@ -30,12 +30,12 @@ import numpy as np
 
 from jaxfilters import constants
 from jaxfilters import geometry
-from jaxfilters.types import FilterInfo, FilterMask, _dataclass, per_robot_bool, robot_inputs
+from jaxfilters.types import FilterInfo, FilterMask, pytree_dataclass, per_robot_bool, robot_inputs
 
 _F32 = jnp.float32
 
 
-@_dataclass
+@pytree_dataclass
 class SpeedState:
   """Per-robot SpeedFilter state.
 
@@ -56,7 +56,7 @@ class SpeedState:
                jnp.zeros((num_robots,), _F32))
 
 
-@_dataclass
+@pytree_dataclass
 class SpeedResult:
   """What one SpeedFilter cycle says, per robot.
 
@@ -100,7 +100,7 @@ class LookaheadConfig:
     object.__setattr__(self, "max_lookahead", max(float(self.max_lookahead), self.min_lookahead))
 
 
-def _exact_sign_affine(d, multiplier, base, offset):
+def exact_sign_affine(d, multiplier, base, offset):
   """Exact sign of d * multiplier + base - offset for float32 inputs (int32 [...])."""
   terms = [*geometry.exact_product(d.astype(_F32), multiplier), base, -jnp.asarray(offset, _F32)]
   return geometry.expansion_sign(terms)
@@ -125,8 +125,8 @@ def speed_limit_at_one(data, mask_origin, mask_res, info: FilterInfo, xy):
   percent = info.type == constants.SPEED_FILTER_PERCENT
   typed = percent | (info.type == constants.SPEED_FILTER_ABSOLUTE)
   raw = d.astype(_F32) * info.multiplier + info.base
-  below_zero = _exact_sign_affine(d, info.multiplier, info.base, 0.0) < 0
-  above_100 = _exact_sign_affine(d, info.multiplier, info.base, 100.0) > 0
+  below_zero = exact_sign_affine(d, info.multiplier, info.base, 0.0) < 0
+  above_100 = exact_sign_affine(d, info.multiplier, info.base, 100.0) > 0
   out_of_range = below_zero | (percent & above_100)
   limit = jnp.where((d == constants.SPEED_MASK_NO_LIMIT) | out_of_range, 0.0, raw)
   valid = inside & typed & (d != constants.SPEED_MASK_UNKNOWN)
@@ -156,14 +156,14 @@ def speed_filter_one(state, data, mask_origin, mask_res, info, pose, enabled, tr
   """
   xy = pose[:2]
   if transform is not None:
-    xy = _transform_point(transform, xy)
+    xy = transform_point(transform, xy)
   limit, valid = speed_limit_at_one(data, mask_origin, mask_res, info, xy)
   prev, changed, ok = _publish_step(state.speed_limit_prev, limit, valid, enabled)
   out = SpeedResult(prev, info.type == constants.SPEED_FILTER_PERCENT, changed, ok, jnp.asarray(False))
   return dataclasses.replace(state, speed_limit_prev=prev), out
 
 
-def _transform_point(transform, xy):
+def transform_point(transform, xy):
   """T_mask_from_global applied to one point [2]."""
   return jnp.stack(geometry.transform_points(transform, xy[0], xy[1]))
 
@@ -197,7 +197,7 @@ def speed_lookahead_one(state, data, mask_origin, mask_res, info, pose, path, pa
     (new state, SpeedResult with scalar leaves).
   """
   if transform is not None:
-    pose = jnp.concatenate([_transform_point(transform, pose[:2]), pose[2:]])
+    pose = jnp.concatenate([transform_point(transform, pose[:2]), pose[2:]])
     path = jnp.stack(geometry.transform_points(transform, path[:, 0], path[:, 1]), axis=-1)
   n = path.shape[0]
   v = jnp.abs(velocity)
@@ -236,14 +236,14 @@ def speed_lookahead_one(state, data, mask_origin, mask_res, info, pose, path, pa
   return new_state, out
 
 
-def _common(mask, poses, state, mask_index, enabled, transform):
+def speed_inputs(mask, poses, state, mask_index, enabled, transform):
   if not isinstance(state, SpeedState):
     raise TypeError(f"state must be a SpeedState (SpeedState.create); got {type(state).__name__}")
   b = state.speed_limit_prev.shape[0]
   return (b, *robot_inputs(mask, poses, b, mask_index, enabled, transform))
 
 
-def _mask_leaves(mask: FilterMask, i):
+def mask_leaves(mask: FilterMask, i):
   """(data [Hm, Wm], origin parts, resolution [], info) of mask i of the stack."""
   origin = geometry.origin_terms(mask.origin[i], None if mask.origin_lo is None else mask.origin_lo[i])
   return (mask.data[i], origin, mask.resolution[i], jax.tree.map(lambda x: x[i], mask.info))
@@ -277,7 +277,7 @@ def speed_filter(mask: FilterMask, poses, state: SpeedState, *, mask_index=None,
   Returns:
     (new SpeedState, SpeedResult [B]).
   """
-  _, idx, idx_ok, poses, enabled, transform = _common(mask, poses, state, mask_index, enabled, transform)
+  _, idx, idx_ok, poses, enabled, transform = speed_inputs(mask, poses, state, mask_index, enabled, transform)
   return _speed_filter_jit(mask, poses, state, idx, idx_ok, enabled, transform)
 
 
@@ -285,7 +285,7 @@ def speed_filter(mask: FilterMask, poses, state: SpeedState, *, mask_index=None,
 def _speed_filter_jit(mask, poses, state, idx, idx_ok, enabled, transform):
   with jax.named_scope("speed_filter"):
     def one(st, i, ok, pose, en, tf):
-      new, out = speed_filter_one(st, *_mask_leaves(mask, i), pose, en, tf)
+      new, out = speed_filter_one(st, *mask_leaves(mask, i), pose, en, tf)
       return guard_index(new, out, st, ok)
 
     return jax.vmap(one, in_axes=(0, 0, 0, 0, 0, None if transform is None else 0))(
@@ -320,7 +320,7 @@ def speed_filter_lookahead(mask: FilterMask, poses, state: SpeedState, paths, pa
   """
   if not isinstance(config, LookaheadConfig):
     raise TypeError(f"config must be a LookaheadConfig; got {type(config).__name__}")
-  b, idx, idx_ok, poses, enabled, transform = _common(mask, poses, state, mask_index, enabled, transform)
+  b, idx, idx_ok, poses, enabled, transform = speed_inputs(mask, poses, state, mask_index, enabled, transform)
   paths = jnp.asarray(paths)
   if paths.ndim != 3 or paths.shape[0] != b or paths.shape[2] != 2 or not jnp.issubdtype(paths.dtype, jnp.floating):
     raise ValueError(f"paths must be float [B, N, 2] with B = {b}; got {paths.dtype}{tuple(paths.shape)}")
@@ -350,7 +350,7 @@ def _lookahead_jit(mask, poses, state, paths, lengths, vel, new_path, idx, idx_o
     len_ok = (lengths >= 0) & (lengths <= paths.shape[1])
 
     def one(st, i, ok, pose, path, n, npth, v, en, tf):
-      new, out = speed_lookahead_one(st, *_mask_leaves(mask, i), pose, path, jnp.where(ok, n, 0), npth, v,
+      new, out = speed_lookahead_one(st, *mask_leaves(mask, i), pose, path, jnp.where(ok, n, 0), npth, v,
                                      en, tf, config=config)
       return guard_index(new, out, st, ok)
 

@@ -24,7 +24,7 @@ from jaxfilters.grid import OccupancyGrid
 from jaxfilters.validate import short_repr
 
 
-def _dataclass(cls):
+def pytree_dataclass(cls):
   cls = dataclasses.dataclass(frozen=True)(cls)
   names = [f.name for f in dataclasses.fields(cls)]
   return jax.tree_util.register_dataclass(cls, data_fields=names, meta_fields=[])
@@ -34,7 +34,7 @@ def _f32(x) -> np.ndarray:
   return np.asarray(x, dtype=np.float32)
 
 
-@_dataclass
+@pytree_dataclass
 class FilterInfo:
   """nav2_msgs/CostmapFilterInfo without the topic: `value = data * multiplier + base`.
 
@@ -83,7 +83,7 @@ class FilterInfo:
     return cls(jnp.asarray(int(type), jnp.int32), jnp.asarray(b32), jnp.asarray(m32))
 
 
-@_dataclass
+@pytree_dataclass
 class FilterMask:
   """A stack of M filter masks of one shape, each with its own geometry and info.
 
@@ -282,7 +282,7 @@ def resolve_mask_index(mask: FilterMask, mask_index: jax.Array | None,
   return jnp.where(ok, idx, 0).astype(jnp.int32), ok
 
 
-@_dataclass
+@pytree_dataclass
 class Costmap:
   """A batch of B costmaps of one [H, W]: rolling-window local maps or full global maps.
 

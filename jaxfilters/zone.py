@@ -30,13 +30,13 @@ import numpy as np
 from jaxfilters import constants
 from jaxfilters import geometry
 from jaxfilters import validate
-from jaxfilters.speed import _mask_leaves, _transform_point
-from jaxfilters.types import FilterMask, _dataclass, robot_inputs
+from jaxfilters.speed import mask_leaves, transform_point
+from jaxfilters.types import FilterMask, pytree_dataclass, robot_inputs
 
 NUM_ZONES = 128  # int8 mask values 0..127
 
 
-@_dataclass
+@pytree_dataclass
 class ZoneTable:
   """Per-zone parameter rows.
 
@@ -95,7 +95,7 @@ class ZoneTable:
     return cls(*(jnp.asarray(a) for a in (values, sets, configured, nominal, has_nominal)))
 
 
-@_dataclass
+@pytree_dataclass
 class ZoneState:
   """Per-robot zone state.
 
@@ -115,7 +115,7 @@ class ZoneState:
                jnp.tile(table.nominal, (num_robots, 1)))
 
 
-@_dataclass
+@pytree_dataclass
 class ZoneResult:
   """One ZoneParameterFilter cycle per robot.
 
@@ -145,7 +145,7 @@ def zone_filter_one(state, table, data, mask_origin, mask_res, info, pose, enabl
   # than 4 is refused, so such a mask drives nothing.
   enabled = enabled & (info.type == constants.ZONE_PARAMETER_FILTER)
   hm, wm = data.shape
-  xy = pose[:2] if transform is None else _transform_point(transform, pose[:2])
+  xy = pose[:2] if transform is None else transform_point(transform, pose[:2])
   mx, my, inside = geometry.world_to_cell(xy[0], xy[1], mask_origin, mask_res, wm, hm)
   d = data[my, mx].astype(jnp.int32)
   zid = jnp.clip(d, 0, NUM_ZONES - 1)
@@ -194,7 +194,7 @@ def zone_filter(mask: FilterMask, poses, state: ZoneState, table: ZoneTable, *, 
 def _zone_jit(mask, poses, state, table, idx, idx_ok, enabled, transform):
   with jax.named_scope("zone_filter"):
     def one(st, i, ok, pose, en, tf):
-      new, out = zone_filter_one(st, table, *_mask_leaves(mask, i), pose, en & ok, tf)
+      new, out = zone_filter_one(st, table, *mask_leaves(mask, i), pose, en & ok, tf)
       return new, ZoneResult(out.zone, out.params, out.event, out.error | ~ok)
 
     return jax.vmap(one, in_axes=(0, 0, 0, 0, 0, None if transform is None else 0))(

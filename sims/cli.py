@@ -358,7 +358,7 @@ def _keepout_pass(f: dict) -> bool:
   return bool(f["keepout_ok"])
 
 
-def _harness_root() -> Path | None:
+def harness_root() -> Path | None:
   """The checkout holding benchmarks/run.py beside the sims package, or None (a wheel install)."""
   import sims
   root = Path(sims.__file__).resolve().parent.parent
@@ -382,7 +382,7 @@ def run_bench(args) -> int:
     CliError: no benchmarks/ beside the sims package and none importable.
   """
   argv = list(getattr(args, "bench_args", []) or [])
-  root = _harness_root()
+  root = harness_root()
   if root is None and importlib.util.find_spec("benchmarks") is None:
     raise CliError("the benchmark harness (benchmarks/run.py) ships with the source checkout, not with "
                    "the installed package; run `jaxfilters bench` from an editable install of a checkout "

@@ -43,7 +43,7 @@ from mujoco import mjx
 from jaxfilters.footprint import window_cells
 from jaxfilters.keepout import KeepoutState
 from jaxfilters.speed import SpeedState, speed_filter
-from jaxfilters.types import Costmap, _dataclass
+from jaxfilters.types import Costmap, pytree_dataclass
 from sims import local_costmap, metrics as metrics_lib, planner
 from sims.config import FleetConfig
 from sims.scenario import Scenario
@@ -53,7 +53,7 @@ _F32 = jnp.float32
 ROBOT_XML = Path(__file__).resolve().parent / "assets" / "planar_robot.xml"
 
 
-@_dataclass
+@pytree_dataclass
 class WorldState:
   """State of one world of K robots (every leaf gains a leading W under vmap).
 
@@ -95,7 +95,7 @@ class WorldState:
   time: jax.Array
 
 
-@_dataclass
+@pytree_dataclass
 class Frame:
   """What a rollout records per env step and robot (for plots and tests).
 

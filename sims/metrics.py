@@ -33,12 +33,12 @@ import numpy as np
 from jaxfilters import geometry
 from jaxfilters.footprint import footprint_in_zone_one
 from jaxfilters.keepout import pose_in_lethal_zone_one
-from jaxfilters.types import FilterMask, _dataclass
+from jaxfilters.types import FilterMask, pytree_dataclass
 
 _F32 = jnp.float32
 
 
-@_dataclass
+@pytree_dataclass
 class Metrics:
   """Accumulated metrics of the K robots of one world.
 

@@ -27,14 +27,14 @@ import jax.numpy as jnp
 import numpy as np
 
 from jaxfilters import constants
-from jaxfilters.types import _dataclass
+from jaxfilters.types import pytree_dataclass
 
 _F32 = jnp.float32
 _SQRT2 = math.sqrt(2.0)
 UNREACHABLE = 1e6  # nav_value where every corner is blocked or unreachable (m)
 
 
-@_dataclass
+@pytree_dataclass
 class NavField:
   """Distance-to-goal fields of S stations on the navigation grid.
 

@@ -152,7 +152,7 @@ def _check_series(config: FleetConfig) -> None:
                      f"got {r.max_yaw_rate * dt}")
 
 
-def _rollout_mode() -> str:
+def rollout_mode() -> str:
   """The default `rollout_grid` mode of this backend (see there)."""
   return "cumsum" if jax.default_backend() == "cpu" else "chain"
 
@@ -190,7 +190,7 @@ def rollout_grid(pose: jax.Array, cmd: jax.Array, speeds: jax.Array, yaw_rates: 
     (v[:, 0] = cmd[0]), 'hc', 'hs' [Nw] heading unit vector at the end.
   """
   _check_series(config)
-  mode = _rollout_mode() if mode is None else mode
+  mode = rollout_mode() if mode is None else mode
   if mode not in ("cumsum", "chain"):
     raise ValueError(f"rollout_grid mode must be 'cumsum', 'chain' or None; got {mode!r}")
   p, r = config.planner, config.robot
@@ -444,7 +444,7 @@ def plan_lut_one(pose, cmd, goal, limit_now, recovering, lut, origin, res, other
   ev = evaluate_lut(pose, cmd, goal, limit_now, recovering, lut, origin, res, others, others_valid, nav,
                     speed_mask, speed_cap, config=config, extra_speeds=extra_speeds, full=False)
   r = config.robot
-  best = _first_argmin(ev["score"])
+  best = first_argmin(ev["score"])
   stopped = ev["collide"][best]
   dt = config.control_dt
   target = ev["targets"][best]
@@ -454,7 +454,7 @@ def plan_lut_one(pose, cmd, goal, limit_now, recovering, lut, origin, res, other
   return command, {"stopped": stopped, "speed_violation": jnp.where(stopped, 0.0, ev["violation"][best])}
 
 
-def _first_argmin(score: jax.Array) -> jax.Array:
+def first_argmin(score: jax.Array) -> jax.Array:
   """jnp.argmin of a 1-D array (the first minimum, or the first NaN) as a min and a masked index min.
 
   XLA:CPU lowers argmin to a variadic (value, index) reduce that is several

@@ -106,10 +106,10 @@ def speed_zones(scenario, max_speed: float | None = None) -> list[dict[str, Any]
     m/s), `limit_mps` (float, nan if unknown), `label` ("50 %" or "0.3 m/s"),
     `cells` (bool [Hs, Ws] on the speed mask's grid).
   """
-  from sims.world import _zone_tables   # the numbering the simulator's metrics use
+  from sims.world import zone_tables   # the numbering the simulator's metrics use
 
   speed = max_speed if max_speed is not None else float("nan")
-  table, _, limits, speeds = _zone_tables(scenario, speed)
+  table, _, limits, speeds = zone_tables(scenario, speed)
   zone_of_cell = table[scenario.speed.data.astype(np.uint8)]
   percent = scenario.speed_type == constants.SPEED_FILTER_PERCENT
   zones = []

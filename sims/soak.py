@@ -24,7 +24,7 @@ import json
 import sys
 import time
 
-from sims import xla_flags
+from jaxfilters import xla_flags
 
 xla_flags.use_fast_cpu_compile()
 

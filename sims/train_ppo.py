@@ -36,9 +36,9 @@ import time
 from pathlib import Path
 from typing import Any, Callable
 
-from sims import xla_flags
+from jaxfilters import xla_flags
 
-xla_flags.use_fast_cpu_compile()   # before the JAX backend starts (see sims/xla_flags.py)
+xla_flags.use_fast_cpu_compile()   # before the JAX backend starts (see jaxfilters/xla_flags.py)
 
 import jax  # noqa: E402
 import jax.numpy as jnp

@@ -38,7 +38,7 @@ from jaxfilters.footprint import band_clearance, footprint_in_zone_one, window_c
 from jaxfilters.inflation import InflationConfig, inflate
 from jaxfilters.keepout import KeepoutConfig, KeepoutState, keepout_filter
 from jaxfilters.static_layer import StaticLayerConfig, static_layer
-from jaxfilters.types import Costmap, FilterInfo, FilterMask, _dataclass
+from jaxfilters.types import Costmap, FilterInfo, FilterMask, pytree_dataclass
 from sims import navigation
 from sims.config import FleetConfig
 from sims.scenario import Scenario, speed_limit_host
@@ -48,7 +48,7 @@ SPAWN_SPACING = 0.8  # m, robots start at least this far apart (2 * 0.22 m radiu
 MAX_SPAWNS = 4096    # spawn points kept per map (robots sample without replacement)
 
 
-@_dataclass
+@pytree_dataclass
 class WorldParams:
   """Device data every world shares (closed over by the env, passed to jit as an argument).
 
@@ -220,7 +220,7 @@ def _footprint_on_zone(data, origin, res, xy, origin_lo, *, radius: float, windo
   return jax.lax.map(one, xy, batch_size=4096)
 
 
-def _zone_tables(scenario: Scenario, max_speed: float):
+def zone_tables(scenario: Scenario, max_speed: float):
   """Zones of the speed mask: (table [256], labels, raw limits, m/s)."""
   values = np.unique(scenario.speed.data.astype(np.int32))
   limits = {}
@@ -368,7 +368,7 @@ def build_world(scenario: Scenario, config: FleetConfig, *, seed: int = 0) -> Wo
   pad = n
   static = np.asarray(static_layer(jnp.asarray(grid.data), config=STATIC_LAYER))
   padded = np.pad(static, pad, constant_values=constants.NO_INFORMATION)
-  table, labels, raw_limits, speeds = _zone_tables(scenario, config.robot.max_speed)
+  table, labels, raw_limits, speeds = zone_tables(scenario, config.robot.max_speed)
   cell_speed = np.asarray(speeds, np.float32)[table[scenario.speed.data.astype(np.uint8)]]
   params = WorldParams(
       static_cost=jnp.asarray(padded),

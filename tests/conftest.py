@@ -3,9 +3,9 @@
 import os
 from pathlib import Path
 
-from sims import xla_flags
+from jaxfilters import xla_flags
 
-# Before JAX starts (see sims/xla_flags.py); the CLI and the benchmarks do the same.
+# Before JAX starts (see jaxfilters/xla_flags.py); the CLI and the benchmarks do the same.
 xla_flags.use_fast_cpu_compile()
 
 import jax  # noqa: E402

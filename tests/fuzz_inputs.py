@@ -343,7 +343,7 @@ def pgm_edit(data: bytes, rng: random.Random) -> bytes:
   return head + data[m.end():]
 
 
-def _png_chunks(data: bytes) -> list[list] | None:
+def png_chunks(data: bytes) -> list[list] | None:
   if not data.startswith(PNG_SIG):
     return None
   pos, out = 8, []
@@ -357,7 +357,7 @@ def _png_chunks(data: bytes) -> list[list] | None:
 
 
 def png_edit(data: bytes, rng: random.Random) -> bytes:
-  chunks = _png_chunks(data)
+  chunks = png_chunks(data)
   if not chunks:
     return _generic(data, rng)
   fix_crc = rng.random() < 0.85

@@ -32,15 +32,15 @@ def test_parts_are_differences_of_the_variants():
 
 
 def test_patches_are_undone_and_missing_names_listed():
-  before = (planner.lut_at, planner.speed_cap_xy, navigation.value_and_direction, planner._rollout_mode)
-  with fb._patched(("costmap", "speed", "nav", "rollout_chain")) as missing:
-    assert planner.lut_at is not before[0] and planner._rollout_mode() == "chain"
+  before = (planner.lut_at, planner.speed_cap_xy, navigation.value_and_direction, planner.rollout_mode)
+  with fb.patched_lookups(("costmap", "speed", "nav", "rollout_chain")) as missing:
+    assert planner.lut_at is not before[0] and planner.rollout_mode() == "chain"
     assert missing == []
-  assert (planner.lut_at, planner.speed_cap_xy, navigation.value_and_direction, planner._rollout_mode) == before
+  assert (planner.lut_at, planner.speed_cap_xy, navigation.value_and_direction, planner.rollout_mode) == before
   saved = planner.lut_at
   try:
     del planner.lut_at
-    with fb._patched(("costmap",)) as missing:
+    with fb.patched_lookups(("costmap",)) as missing:
       assert missing == ["sims.planner.lut_at"]
   finally:
     planner.lut_at = saved

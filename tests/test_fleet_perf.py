@@ -303,7 +303,7 @@ def test_rollout_grid_rejects_an_unknown_mode():
     [-0.0, 0.0, -0.0], [np.nan]])
 def test_first_argmin_is_argmin(values):
   x = jnp.asarray(values, jnp.float32)
-  assert int(planner._first_argmin(x)) == int(jnp.argmin(x))
+  assert int(planner.first_argmin(x)) == int(jnp.argmin(x))
   rng = np.random.default_rng(6)
   x = jnp.asarray(rng.integers(0, 4, (200, 9)).astype(np.float32))
-  np.testing.assert_array_equal(jax.vmap(planner._first_argmin)(x), jnp.argmin(x, axis=1))
+  np.testing.assert_array_equal(jax.vmap(planner.first_argmin)(x), jnp.argmin(x, axis=1))

@@ -21,7 +21,7 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from jaxfilters.inflation import (InflationConfig, _squared_distance, _tables, compute_cost,
+from jaxfilters.inflation import (InflationConfig, squared_distance, cost_tables, compute_cost,
                                   footprint_radii, inflate, inflate_one)
 from jaxfilters.static_layer import StaticLayerConfig, static_layer, static_layer_table
 from jaxfilters.types import Costmap
@@ -325,14 +325,14 @@ def test_squared_distance_exact(r):
     true = np.min((yy[..., None] - sy) ** 2 + (xx[..., None] - sx) ** 2, axis=-1)
     want = np.minimum(true, (r + 1) ** 2)
     for dtype in (jnp.int16, jnp.int32):
-      got = jax.jit(_squared_distance, static_argnums=(1, 2))(jnp.asarray(src), r, dtype)
+      got = jax.jit(squared_distance, static_argnums=(1, 2))(jnp.asarray(src), r, dtype)
       np.testing.assert_array_equal(np.asarray(got), want)
 
 
 def test_sq_table_matches_float32_distance():
   cfg = InflationConfig(inflation_radius=0.7, inscribed_radius=0.22, resolution=0.05,
                         cost_scaling_factor=3.0)
-  lut, by_sq, max_sq = _tables(cfg)
+  lut, by_sq, max_sq = cost_tables(cfg)
   assert max_sq == 14 ** 2
   for s in range(max_sq + 1):
     d = np.sqrt(np.float32(s))

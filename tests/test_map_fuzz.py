@@ -185,7 +185,7 @@ def test_mutated_pgm_loads_exactly_when_a_reference_parser_accepts_it(index):
 
 def ref_png_gray8(data: bytes) -> tuple[int, int, np.ndarray] | None:
   """IHDR and plain-Python unfiltered pixels of an 8-bit gray non-interlaced PNG, else None."""
-  chunks = fz._png_chunks(data)
+  chunks = fz.png_chunks(data)
   if not chunks or chunks[0][0] != b"IHDR" or len(chunks[0][1]) != 13:
     return None
   w, h, depth, colour, _, _, interlace = struct.unpack(">IIBBBBB", chunks[0][1])

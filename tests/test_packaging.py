@@ -48,7 +48,7 @@ def test_extras_are_named_for_what_they_bring():
 def test_bench_outside_a_checkout_is_a_one_line_usage_error(monkeypatch, capsys):
   monkeypatch.setenv("XLA_FLAGS", os.environ.get("XLA_FLAGS", ""))
   import sims.cli as sims_cli
-  monkeypatch.setattr(sims_cli, "_harness_root", lambda: None)
+  monkeypatch.setattr(sims_cli, "harness_root", lambda: None)
   monkeypatch.setattr(sims_cli.importlib.util, "find_spec", lambda name: None)
   assert cli.main(["bench", "--quick"]) == cli.EXIT_USAGE
   err = capsys.readouterr().err
@@ -57,7 +57,7 @@ def test_bench_outside_a_checkout_is_a_one_line_usage_error(monkeypatch, capsys)
 
 def test_harness_is_found_beside_the_sims_package():
   import sims.cli as sims_cli
-  assert sims_cli._harness_root() == ROOT
+  assert sims_cli.harness_root() == ROOT
 
 
 _BLOCK_WARP = """

@@ -16,6 +16,7 @@ import numpy as np
 import pytest
 from hypothesis import given, strategies as st
 
+from tests.compile_count import count_compiles
 from jaxfilters import constants
 from jaxfilters import shapes as S
 from jaxfilters.grid import OccupancyGrid
@@ -228,14 +229,14 @@ def test_moving_adding_removing_shapes_compiles_nothing():
   items, origin, res = _case(3)
   sh = S.Shapes.create(items[:2], **SLOTS)
   S.rasterize(sh, origin, res, shape=(H, W)).data.block_until_ready()
-  before = S._rasterize._cache_size()          # the jitted program behind `rasterize`
   moved = dataclasses.replace(sh, vertices=sh.vertices + 0.37, center=sh.center - 0.21)
   added = sh.set_circle(SLOTS["max_circles"] - 1, S.Circle(origin + 1.0, 0.8, 42))
   removed = added.remove_polygon(0) if bool(added.polygon_active[0]) else added.remove_circle(0)
-  for s, o, r, kw in ((moved, origin, res, {}), (added, origin + 0.5, res * 2, dict(default_value=0)),
-                      (removed, origin, res, dict(overlay_type=S.OVERLAY_MIN))):
-    S.rasterize(s, o, r, shape=(H, W), **kw).data.block_until_ready()
-  assert S._rasterize._cache_size() == before
+  with count_compiles() as compiles:
+    for s, o, r, kw in ((moved, origin, res, {}), (added, origin + 0.5, res * 2, dict(default_value=0)),
+                        (removed, origin, res, dict(overlay_type=S.OVERLAY_MIN))):
+      S.rasterize(s, o, r, shape=(H, W), **kw).data.block_until_ready()
+  assert compiles() == 0
   got = np.asarray(S.rasterize(added, origin, res, shape=(H, W)).data)
   want_items = [i for i in items[:2]] + [S.Circle(origin + 1.0, 0.8, 42)]
   np.testing.assert_array_equal(got, _reference(want_items, origin, res, H, W))
@@ -300,9 +301,9 @@ def test_out_of_domain_values_under_jit_are_flagged_not_drawn():
   assert not bool(S.rasterize(loud, **grid).valid)
   assert not bool(S.rasterize(sh, grid["origin"], np.float32(0.0), shape=(H, W)).valid)
   # Overlay settings out of range that reach the device (traced, so the host check cannot
-  # see them; the jitted program behind `rasterize` is called directly): all unknown, flagged.
+  # see them; the per-grid kernel is jitted with them as arguments): all unknown, flagged.
   for d, o in ((-5, 0), (0, 3)):
-    bad = S._rasterize(sh, grid["origin"], grid["resolution"], d, o, shape=(H, W))
+    bad = jax.jit(lambda d, o: S.rasterize_one(sh, grid["origin"], grid["resolution"], d, o, shape=(H, W)))(d, o)
     assert not bool(bad.valid) and (np.asarray(bad.data) == -1).all()
   # Removed (inactive) shapes are not checked: an inactive NaN slot is fine.
   assert bool(S.rasterize(nan.remove_circle(0), **grid).valid)

@@ -36,7 +36,7 @@ def _run(code: str, devices: int, timeout: float = 900) -> subprocess.CompletedP
 
 
 SINGLE = f"""
-from sims import xla_flags
+from jaxfilters import xla_flags
 xla_flags.use_fast_cpu_compile()
 import json, sys
 import jax, jax.numpy as jnp, numpy as np

@@ -258,7 +258,7 @@ def test_large_batch_does_not_deadlock():
       full = fleet_throughput(1280, 20, filters=True, robots_per_world=4, repeats=1)
       print(json.dumps([bare, full]))
   """)
-  env = dict(os.environ)  # conftest already chose the XLA:CPU flags (sims/xla_flags.py)
+  env = dict(os.environ)  # conftest already chose the XLA:CPU flags (jaxfilters/xla_flags.py)
   proc = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=300,
                         cwd=Path(__file__).resolve().parents[1], env=env)
   assert proc.returncode == 0, proc.stderr[-2000:]

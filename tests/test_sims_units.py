@@ -215,8 +215,8 @@ def test_speed_cap_table_matches_speed_limit_at_one():
   """The planner's per-cell cap (before dilation) is speed_limit_at_one's limit in m/s."""
   sc = Scenario.default()
   world_cfg = FleetConfig()
-  from sims.world import _zone_tables
-  table, _, _, speeds = _zone_tables(sc, world_cfg.robot.max_speed)
+  from sims.world import zone_tables
+  table, _, _, speeds = zone_tables(sc, world_cfg.robot.max_speed)
   speeds = np.asarray(speeds, np.float32)
   data = sc.speed.data
   rng = np.random.default_rng(0)
@@ -314,9 +314,9 @@ def test_proximity_update_hand_built():
 
 def test_zone_and_keepout_lookups_on_default_maps():
   from jaxfilters.types import FilterInfo, FilterMask
-  from sims.world import _zone_tables
+  from sims.world import zone_tables
   sc = Scenario.default()
-  table, labels, _, _ = _zone_tables(sc, 0.5)
+  table, labels, _, _ = zone_tables(sc, 0.5)
   speed = FilterMask.create(sc.speed, FilterInfo.create(1, 100.0, -1.0))
   keepout = FilterMask.create(sc.keepout, FilterInfo.create(0))
   pts = jnp.asarray([[0.0, 0.0], [13.0, 5.0], [-10.0, 5.0], [8.0, 2.5], [100.0, 0.0], [-0.99, -2.99],

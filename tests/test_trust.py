@@ -14,6 +14,7 @@ import jax.numpy as jnp
 import numpy as np
 import pytest
 
+from tests.compile_count import count_compiles
 import jaxfilters as jf
 from jaxfilters import keepout as ko
 from jaxfilters import speed as sp
@@ -229,12 +230,11 @@ def test_eager_speed_filter_compiles_once_without_per_robot_mask_copies():
   mask = jf.FilterMask.create(_grid(np.random.default_rng(0).integers(0, 100, (h, w)), 0.05, (0.0, 0.0)),
                               jf.FilterInfo.create(1, 100.0, -1.0))
   poses = np.random.default_rng(1).uniform(0, 9, (b, 3)).astype(np.float32)
-  before = sp._speed_filter_jit._cache_size()
   state, out = jf.speed_filter(mask, poses, jf.SpeedState.create(b))
-  state, out = jf.speed_filter(mask, poses[::-1].copy(), state)
-  assert sp._speed_filter_jit._cache_size() == before + 1
-  _, idx, ok, p, en, tf = sp._common(mask, poses, state, None, None, None)
-  compiled = sp._speed_filter_jit.lower(mask, p, state, idx, ok, en, tf).compile()
+  with count_compiles() as compiles:   # new values, same shapes: nothing compiles
+    state, out = jf.speed_filter(mask, poses[::-1].copy(), state)
+  assert compiles() == 0
+  compiled = jax.jit(jf.speed_filter).lower(mask, poses, state).compile()
   temp = compiled.memory_analysis().temp_size_in_bytes
   assert temp < b * h * w // 10, temp        # a per-robot copy of the mask would be B*H*W bytes
 
