@@ -9,7 +9,7 @@ settings as a `MapMetadata`. `load_map_image` is the pure NumPy pixel
 conversion they use. `save_map` writes `<name>.yaml` + image the way
 `map_saver` does, or, given a `MapMetadata`, so that the map loads back exactly.
 
-Deliberate deviations from Nav2 (the project's issue asks for loud failures):
+Deliberate deviations from Nav2 (bad input fails loudly instead of loading a plausible wrong map):
   - Bad input raises instead of returning a load status: `FileNotFoundError`
     for a missing YAML or image, `ValueError` (naming the file and the key)
     for everything else, whatever the files contain.
