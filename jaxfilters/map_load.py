@@ -149,7 +149,9 @@ def _as_uint8(name: str, arr: np.ndarray) -> np.ndarray:
 
 
 def gray_table(mode: str, occupied: float, free: float, negate: bool) -> np.ndarray:
-  """(Used by loading and by `map_save`'s exact saves.) int8 [256]: the occupancy each opaque gray 0..255 loads as (docs/nav2_semantics.md §10.2).
+  """int8 [256]: the occupancy each opaque gray 0..255 loads as (docs/nav2_semantics.md §10.2).
+
+  Loading reads pixels through it; `map_save` inverts it for exact saves.
 
   Every pixel is converted independently, so one table of the 256 grays,
   computed with the exact float32 operations, is the whole conversion.

@@ -225,8 +225,8 @@ def _filter(ld: _Loader, costmap: Node, name: str, as_layer: bool):
   binary = cls is Nav2BinaryFilter
   # BinaryFilter does not join its topics with the parent namespace (docs/nav2_semantics.md §8.3).
   topic_ns = costmap.namespace if binary else parent_namespace(costmap.namespace)
-  hint = (" (BinaryFilter does not join relative topics with the parent namespace, docs/nav2_semantics.md §8.3, so they "
-          "resolve in the costmap's namespace: use an absolute '/topic')") if binary else ""
+  hint = (" (BinaryFilter does not join relative topics with the parent namespace, docs/nav2_semantics.md "
+          "§8.3, so they resolve in the costmap's namespace: use an absolute '/topic')") if binary else ""
   enabled = r.get(f"{name}.enabled", "bool", True)
   info_topic = resolve_topic(r.get(f"{name}.filter_info_topic", "str"), topic_ns, r.where, f"{name}.filter_info_topic")
   tolerance = _float32(r, f"{name}.transform_tolerance", 0.1)
