@@ -11,7 +11,8 @@ files fail loudly and cheaply instead of decoding into a plausible wrong map:
     file can hold (a 92-byte PNG cannot hold 13000 x 13000 pixels).
   - The YAML is parsed with PyYAML's safe loader minus aliases (no
     billion-laughs documents), merge keys, duplicate keys and nesting deeper
-    than `MAX_YAML_DEPTH`.
+    than `MAX_YAML_DEPTH` (`strict_yaml.parse_yaml`, which Nav2 params files
+    go through too, with their own caps).
   - PNG: every chunk's CRC, the chunk order, and the zlib stream (complete,
     Adler-32 checked, decompressing to exactly the declared size) are verified
     before Pillow decodes it; palette indices must lie inside the palette.
@@ -42,9 +43,9 @@ import zlib
 from typing import Any
 
 import numpy as np
-import yaml
 from PIL import Image
 
+from jaxfilters.strict_yaml import parse_yaml
 from jaxfilters.validate import short_repr
 
 __all__ = ["MAX_IMAGE_HEADER_BYTES", "MAX_MAP_CELLS", "MAX_YAML_BYTES", "MAX_YAML_DEPTH",
@@ -158,81 +159,14 @@ def _read_exactly(fd: int, n: int) -> bytes:
 # --------------------------------------------------------------------------- YAML
 
 
-# libyaml's parser when PyYAML has it: the pure-Python scanner is slow on hostile text.
-_YamlBase = getattr(yaml, "CSafeLoader", yaml.SafeLoader)
-
-
-class _MapYamlLoader(_YamlBase):
-  """PyYAML's safe loader that also refuses merge keys and duplicate keys.
-
-  A duplicate key would make one of two values win silently; a merge key
-  (`<<`) needs an alias or hides which value a key has.
-  """
-
-  def construct_mapping(self, node, deep=False):
-    if isinstance(node, yaml.MappingNode):
-      seen = set()
-      for key_node, _ in node.value:
-        if key_node.tag == "tag:yaml.org,2002:merge":
-          raise yaml.constructor.ConstructorError(
-              None, None, "YAML merge keys (<<) are not allowed in a map YAML", key_node.start_mark)
-        key = self.construct_object(key_node, deep=True)
-        try:
-          duplicate = key in seen
-        except TypeError:
-          raise yaml.constructor.ConstructorError(
-              None, None, f"unhashable mapping key {short_repr(key, 40)}",
-              key_node.start_mark) from None
-        if duplicate:
-          raise yaml.constructor.ConstructorError(
-              None, None, f"duplicate key {short_repr(key, 40)}", key_node.start_mark)
-        seen.add(key)
-    return super().construct_mapping(node, deep)
-
-
-def _check_events(text: str) -> None:
-  """Refuses aliases and deep nesting from the event stream, before building anything.
-
-  An alias lets a few hundred bytes describe billions of leaves (its repr alone
-  is hundreds of megabytes); a map YAML never needs one, nor nesting deeper
-  than `MAX_YAML_DEPTH` (it needs 2), and stopping early bounds the parser's
-  time on hostile nesting.
-  """
-  depth = 0
-  for event in yaml.parse(text, Loader=_MapYamlLoader):
-    if isinstance(event, yaml.AliasEvent):
-      raise yaml.composer.ComposerError(
-          None, None, "YAML aliases (*name) are not allowed in a map YAML", event.start_mark)
-    if isinstance(event, (yaml.SequenceStartEvent, yaml.MappingStartEvent)):
-      depth += 1
-      if depth > MAX_YAML_DEPTH:
-        raise yaml.composer.ComposerError(
-            None, None, f"YAML nested deeper than {MAX_YAML_DEPTH} levels", event.start_mark)
-    elif isinstance(event, (yaml.SequenceEndEvent, yaml.MappingEndEvent)):
-      depth -= 1
-
-
 def parse_map_yaml(text: bytes, path: str) -> Any:
-  """Parses map YAML bytes (UTF-8) safely; returns the document.
+  """Parses map YAML bytes (UTF-8) with `parse_yaml` and the map's depth cap; returns the document.
 
   Raises:
-    ValueError: not UTF-8, invalid YAML, an alias, merge key or duplicate
-      key, nesting deeper than `MAX_YAML_DEPTH`, or any other parse failure;
-      the message names `path` and is at most a few hundred characters.
+    ValueError: as `parse_yaml`, naming `path`; a map YAML may nest at most
+      `MAX_YAML_DEPTH` levels.
   """
-  try:
-    doc = text.decode("utf-8")
-    _check_events(doc)
-    return yaml.load(doc, Loader=_MapYamlLoader)  # noqa: S506 - a safe loader
-  except UnicodeDecodeError as e:
-    raise ValueError(f"{path}: invalid map YAML: not UTF-8 text ({_cut(e.reason)} at byte "
-                     f"{e.start})") from None
-  except RecursionError:
-    raise ValueError(f"{path}: invalid map YAML: nested too deeply") from None
-  except yaml.YAMLError as e:
-    raise ValueError(f"{path}: invalid map YAML: {_cut(e)}") from None
-  except Exception as e:  # noqa: BLE001 - e.g. a timestamp PyYAML cannot build (2001-02-30)
-    raise ValueError(f"{path}: invalid map YAML: {type(e).__name__}: {_cut(e)}") from None
+  return parse_yaml(text, path, what="map YAML", max_depth=MAX_YAML_DEPTH)
 
 
 # --------------------------------------------------------------------------- images

@@ -9,7 +9,8 @@ Messages (dicts nest as the .msg files do; a `header` is
                                         SpeedResult [B]      speed_limit_msgs
   std_msgs/msg/Bool                 <-> bool, BinaryResult   bool_to_msg / _from_msg, binary_state_msgs
 
-The Nav2 design note's older names are available with naming="design":
+The older names of Nav2's costmap filters design document (docs/nav2_semantics.md §8)
+are available with naming="design":
 nav2_msgs/msg/MaxSpeed (`max_speed` instead of `speed_limit`) and
 CostmapFilterInfo's `map_mask_topic` (instead of `filter_mask_topic`).
 
@@ -53,8 +54,8 @@ MAX_SPEED = "nav2_msgs/msg/MaxSpeed"
 BOOL = "std_msgs/msg/Bool"
 NAMINGS = ("nav2", "design")
 
-# nav2_msgs definitions (field lines as in Nav2; comments ours). MaxSpeed is the
-# design note's name for SpeedLimit, kept so bags of that naming can be written.
+# nav2_msgs definitions (field lines as in Nav2; comments ours). MaxSpeed is the design
+# document's name for SpeedLimit (docs/nav2_semantics.md §8), so bags of that naming can be written.
 MSG_DEFINITIONS = {
     COSTMAP_FILTER_INFO: """std_msgs/Header header
 # filter type: 0 keepout/lanes, 1 speed limit in percent, 2 speed limit in m/s,
@@ -358,8 +359,8 @@ def filter_info_to_msg(info: FilterInfo, filter_mask_topic: str, *, frame_id: st
 def filter_info_from_msg(msg: dict) -> tuple[FilterInfo, str]:
   """nav2_msgs/msg/CostmapFilterInfo dict -> (FilterInfo, mask topic).
 
-  Accepts either `filter_mask_topic` (Nav2) or `map_mask_topic` (design
-  note), not both.
+  Accepts either `filter_mask_topic` (Nav2) or `map_mask_topic` (the design
+  document's name, docs/nav2_semantics.md §8), not both.
 
   Raises:
     ValueError: a missing or mistyped field, a type outside 0..4, a base or
@@ -370,7 +371,7 @@ def filter_info_from_msg(msg: dict) -> tuple[FilterInfo, str]:
   keys = [k for k in ("filter_mask_topic", "map_mask_topic") if isinstance(msg, dict) and k in msg]
   if len(keys) != 1:
     raise ValueError(f"{w} must have exactly one of filter_mask_topic (Nav2) and map_mask_topic "
-                     f"(design note); got {keys or 'neither'}")
+                     f"(Nav2's design document); got {keys or 'neither'}")
   topic = _str(msg[keys[0]], f"{w}.{keys[0]}", nonempty=True)
   typ = _int(_field(msg, "type", w), f"{w}.type", 0, 255)
   if typ not in constants.FILTER_TYPES:
@@ -386,7 +387,7 @@ def filter_info_from_msg(msg: dict) -> tuple[FilterInfo, str]:
 
 def speed_limit_to_msg(speed_limit: float, percentage: bool, *, frame_id: str = "map",
                        stamp: dict | None = None, naming: str = "nav2") -> dict:
-  """A speed limit -> nav2_msgs/msg/SpeedLimit (or the design note's MaxSpeed) dict.
+  """A speed limit -> nav2_msgs/msg/SpeedLimit (or the design document's MaxSpeed, docs/nav2_semantics.md §8) dict.
 
   Args:
     speed_limit: percent of the maximum speed (percentage True) or m/s; 0.0
@@ -424,7 +425,7 @@ def speed_limit_from_msg(msg: dict) -> tuple[float, bool]:
   keys = [k for k in ("speed_limit", "max_speed") if isinstance(msg, dict) and k in msg]
   if len(keys) != 1:
     raise ValueError(f"{w} must have exactly one of speed_limit (Nav2) and max_speed (design "
-                     f"note MaxSpeed); got {keys or 'neither'}")
+                     f"document MaxSpeed); got {keys or 'neither'}")
   percentage = _bool(_field(msg, "percentage", w), f"{w}.percentage")
   return _speed_value(msg[keys[0]], percentage, f"{w}.{keys[0]}"), percentage
 

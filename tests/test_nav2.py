@@ -1,6 +1,6 @@
 """jaxfilters.nav2.load_params: real Nav2 bringup params, and params files written here.
 
-Expected values come from the spec and hand-written tables; the speed, binary
+Expected values come from docs/nav2_semantics.md and hand-written tables; the speed, binary
 and zone results are checked against tests/reference.py (float64 loops) and,
 for the warehouse masks, against the raw PGM pixels.
 """
@@ -61,7 +61,7 @@ def test_bringup_file_wiring(bringup, nav2_maps):
 
 
 def _pgm_occupancy(path, mx, my):
-  """Scale-mode 1.0/0.0 occupancy of grid cell (mx, my), read from the raw PGM (spec §10.2)."""
+  """Scale-mode 1.0/0.0 occupancy of grid cell (mx, my), read from the raw PGM (docs/nav2_semantics.md §10.2)."""
   img = np.asarray(Image.open(path).convert("L"))
   g = img[img.shape[0] - 1 - my, mx]
   occ = 1.0 - np.float32(g) / np.float32(255.0)

@@ -127,7 +127,7 @@ def test_filter_info_both_ways_and_naming():
   back, topic = ros.filter_info_from_msg(msg)
   assert topic == "/speed_filter_mask"
   assert (int(back.type), float(back.base), float(back.multiplier)) == (1, 100.0, -1.0)
-  # float32 fields: 0.1 travels as 0.10000000149011612 (spec §3).
+  # float32 fields: 0.1 travels as 0.10000000149011612 (docs/nav2_semantics.md §3).
   msg = ros.filter_info_to_msg(FilterInfo.create(2, 0.1, 0.2), "/m", naming="design")
   assert "map_mask_topic" in msg and "filter_mask_topic" not in msg
   assert msg["base"] == float(np.float32(0.1))
