@@ -1,6 +1,6 @@
 """Where the fleet step's time goes: the step with each part removed, scaled or replaced, one figure each.
 
-    python benchmarks/fleet_breakdown.py 65536            # the lead's GPU run (B = 8192 worlds x 8)
+    python benchmarks/fleet_breakdown.py 65536            # GPU, full size (B = 8192 worlds x 8)
     python benchmarks/fleet_breakdown.py 512 --repeats 3  # CPU, a few minutes
     python benchmarks/fleet_breakdown.py 512 --only full,physics
     python benchmarks/fleet_breakdown.py 65536 --time-budget 500   # under a 10-minute limit
