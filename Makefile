@@ -26,3 +26,10 @@ bench: $(STAMP)
 
 clean:
 	rm -rf $(VENV) out
+
+.PHONY: docs
+
+# The API reference from the docstrings (mkdocs.yml, strict: a broken cross-reference fails) into site/.
+docs: $(STAMP)
+	$(PY) -m pip install -q -c constraints.txt -e '.[docs]'
+	$(PY) -m mkdocs build --strict --site-dir site

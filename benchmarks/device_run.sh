@@ -28,7 +28,7 @@ python3 -c 'import sys, jax, mujoco; print("python", sys.version.split()[0], "ja
 if [ "${TESTS:-1}" = 1 ]; then
 echo "== exact-arithmetic tests on the GPU (FMA contraction) -> $OUT/gpu_tests.log"
 # test_keepout_paths: the fast paths' error bounds (2-ulp division, FMA, flush-to-zero) on this device;
-# test_trust: the double-geometry and issue 7 cases.
+# test_trust: costmaps with double (float64) geometry beside float32 masks.
 timeout "${TEST_TIMEOUT:-300}" python3 -m pytest -q tests/test_geometry.py tests/test_fast_paths.py \
   tests/test_keepout_paths.py tests/test_trust.py -k "not eager_speed_filter_compiles_once" \
   -p no:cacheprovider > "$OUT/gpu_tests.log" 2>&1

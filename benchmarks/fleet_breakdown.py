@@ -1,6 +1,6 @@
 """Where the fleet step's time goes: the step with each part removed, scaled or replaced, one figure each.
 
-    python benchmarks/fleet_breakdown.py 65536            # the lead's GPU run (B = 8192 worlds x 8)
+    python benchmarks/fleet_breakdown.py 65536            # GPU, full size (B = 8192 worlds x 8)
     python benchmarks/fleet_breakdown.py 512 --repeats 3  # CPU, a few minutes
     python benchmarks/fleet_breakdown.py 512 --only full,physics
     python benchmarks/fleet_breakdown.py 65536 --time-budget 500   # under a 10-minute limit
@@ -17,7 +17,7 @@ is a difference of two measured figures:
 | speed_clip | + speed filter, goals, progress checker, recovery and the clip; the planner's command is a constant twist |
 | costmap | + the 5 Hz local costmap (static window, robots, inflation, keepout filter, planner table) |
 | full | + the 20 Hz planner: the default fleet step |
-| reference_planner | full with the planner as it was before the performance work (tests/planner_reference.py) |
+| reference_planner | full with the straightforward reference planner (reference/planner.py) |
 | candidates_3 / candidates_half / candidates_double | full with 3, about half or twice the planner's candidates |
 | const_costmap_lookups / const_speed_lookups / const_nav_lookups / const_lookups | full with the planner's local-costmap, speed-cap or navigation-field lookups (or all three) replaced by constants |
 | controller_10hz | full with the controller at 10 Hz (same costmap rate) |
@@ -52,6 +52,7 @@ xla_flags.use_fast_cpu_compile()
 import jax  # noqa: E402
 import jax.numpy as jnp  # noqa: E402
 
+from reference import planner as planner_reference  # noqa: E402
 from sims import bench, navigation, planner  # noqa: E402
 from sims.config import FleetConfig  # noqa: E402
 from sims.env import FleetEnv, WorldState, mjx_step  # noqa: E402
@@ -70,9 +71,9 @@ class VariantEnv(FleetEnv):
       whose command is the constant twist) or 'none' (the constant twist only).
     metrics: accumulate the per-physics-step and proximity metrics.
     extra_speeds: offer the planner the zone speeds as extra candidates.
-    reference: plan with the planner as it was before the performance work
-      (tests/planner_reference.py: one robot's costmap and its hard cells looked up
-      separately, 81 full rollouts), for a before/after figure in one run.
+    reference: plan with the straightforward reference planner (reference/planner.py:
+      one robot's costmap and its hard cells looked up separately, 81 full rollouts),
+      to compare the optimised planner with it in one run.
   """
   costmap: bool = True
   control: str = "planner"
@@ -89,7 +90,7 @@ class VariantEnv(FleetEnv):
     if not self.costmap:
       return state
     state = super()._update_costmaps(state)
-    if self.reference:   # the old step kept hard_cells beside the costmap; plan_lut carries it here
+    if self.reference:   # the reference planner reads hard_cells beside the costmap; plan_lut carries it here
       state = dataclasses.replace(
           state, plan_lut=jax.vmap(planner.hard_cells)(state.local.cost).astype(state.plan_lut.dtype))
     return state
@@ -102,7 +103,6 @@ class VariantEnv(FleetEnv):
 
   def _plan(self, s, poses, goal, cap, recovering):
     if self.control == "planner" and self.reference:
-      from tests import planner_reference  # noqa: PLC0415 - only this variant needs it
       p, k = self.params, self.num_robots
       plan = functools.partial(planner_reference.plan_one, nav=p.nav, speed_mask=p.speed,
                                speed_cap=p.speed_cap, config=self.config, extra_speeds=self.zone_speeds)
@@ -177,6 +177,11 @@ _LOOKUPS = {
 
 @contextlib.contextmanager
 def patched_lookups(kinds):
+  """Replaces the planner lookups of `kinds` (keys of the lookup table above) while the block runs.
+
+  Yields the dotted names this version of sims lacks (skipped); restores every replaced
+  attribute on exit, also when the block raises.
+  """
   saved, missing = [], []
   try:
     for kind in kinds:

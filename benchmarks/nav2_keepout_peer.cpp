@@ -1,7 +1,7 @@
 // A Nav2-style C++ peer for the keepout benchmarks: KeepoutFilter::process as a per-cell
-// loop in doubles, one robot after another on one core (spec nav2_filters.md §2, §4.3-§4.4).
+// loop in doubles, one robot after another on one core (docs/nav2_semantics.md §2, §4.3-§4.4).
 //
-// Written for this project from the spec; it is what one Nav2 costmap thread does per
+// Written for this project from docs/nav2_semantics.md; it is what one Nav2 costmap thread does per
 // cycle, repeated for a fleet of B costmaps:
 //   * same frame: the window is clipped to the mask's overlap with worldToMapNoBounds of the
 //     mask's corners plus the mask's half cell (an early return leaves the costmap as is);
@@ -11,7 +11,7 @@
 //     worldToMap on the mask, getMaskCost (round(2.54 d), -1 -> 255), and the write rule
 //     `data != 255 and (data > old or old == 255)`, writing lethal_override_cost in escape mode.
 // Nav2's tf2 rotates with a matrix built from a quaternion; this peer uses cos/sin of the
-// yaw like tests/reference.py, so its integers can be checked against the reference bit for
+// yaw like reference/nav2.py, so its integers can be checked against the reference bit for
 // bit (the work per cell is the same: 4 multiplies and 4 adds).
 //
 // Built by benchmarks/run.py with `g++ -O2 -ffp-contract=off -shared -fPIC` (no FMA
@@ -25,7 +25,7 @@ namespace {
 
 constexpr unsigned char kNoInformation = 255;
 
-// getMaskCost (spec §1.4): OccupancyGrid value -> cost; unknown (-1), and values outside
+// getMaskCost (docs/nav2_semantics.md §1.4): OccupancyGrid value -> cost; unknown (-1), and values outside
 // 0..100 (undefined in Nav2, unknown in jaxfilters), give NO_INFORMATION.
 inline unsigned char MaskCost(int8_t d) {
   if (d < 0 || d > 100) return kNoInformation;

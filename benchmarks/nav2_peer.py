@@ -4,11 +4,11 @@ The harness compiles the peer at benchmark time with `g++ -O2` (or `$CXX`), load
 with ctypes and times it on the same inputs as the JAX paths, on one core like Nav2's
 costmap thread. Where no compiler exists the peer is skipped with the reason.
 
-Before a peer figure is timed its integers are checked: equal to `tests/reference.py`
+Before a peer figure is timed its integers are checked: equal to `reference/nav2.py`
 (float64, the same arithmetic) on the first robot, and equal to the JAX output on every
 robot it runs, cell for cell in the same frame; with a frame transform (SE2) except at
 cells whose float64 mask coordinate lies within `SE2_EDGE_BAND_M` of a mask-cell edge
-(JAX rotates cell centres in float32, as jaxfilters/keepout.py documents). A failed
+(JAX rotates cell centres in float32, as `jaxfilters.keepout` documents). A failed
 check raises, so no ratio is reported against a peer that computes something else.
 """
 
@@ -24,6 +24,8 @@ import tempfile
 import time
 
 import numpy as np
+
+from reference import nav2 as nav2_reference
 
 SOURCE = pathlib.Path(__file__).with_name("nav2_keepout_peer.cpp")
 FLAGS = ("-O2", "-ffp-contract=off", "-shared", "-fPIC")
@@ -163,17 +165,13 @@ def check(fn, inp, jax_cost, label="JAX"):
 
 
 def _reference_check(got, inp):
-  """Robot 0 of the peer against tests/reference.py (float64 loops, shares no code)."""
-  try:
-    from tests import reference   # noqa: PLC0415 - the float64 reference lives with the tests
-  except ImportError as e:
-    return f"; reference check skipped ({e})"
+  """Robot 0 of the peer against reference/nav2.py (float64 loops, shares no code)."""
   tf = None if inp["transform"] is None else inp["transform"][0]
   h, w = got.shape[1:]
   win = np.clip(inp["window"][0], 0, [w, h, w, h])
-  want, _ = reference.keepout_process(inp["cost"][0], inp["origin"][0], inp["res"][0],
-                                      inp["masks"][inp["mask_index"][0]], inp["mask_origin"][inp["mask_index"][0]],
-                                      inp["mask_res"][inp["mask_index"][0]], win, transform=tf)
+  want, _ = nav2_reference.keepout_process(inp["cost"][0], inp["origin"][0], inp["res"][0],
+                                           inp["masks"][inp["mask_index"][0]], inp["mask_origin"][inp["mask_index"][0]],
+                                           inp["mask_res"][inp["mask_index"][0]], win, transform=tf)
   if not np.array_equal(got[0], want):
-    raise AssertionError(f"C++ peer and tests/reference.py differ at {int((got[0] != want).sum())} cells")
-  return "; equal to tests/reference.py (float64) on robot 0"
+    raise AssertionError(f"C++ peer and reference/nav2.py differ at {int((got[0] != want).sum())} cells")
+  return "; equal to reference/nav2.py (float64) on robot 0"

@@ -19,7 +19,7 @@ Figures (each with `compile_s` apart from the steady state, the device named):
   throughput(d) / throughput(1) / d for strong.
 
 Needs the `rl` extra. `--quick` runs every figure at tiny sizes (the CPU check
-that the script works); the lead runs the full sizes on the GPU.
+that the script works); the full sizes are for a GPU (`RL=1 bash benchmarks/device_run.sh`).
 """
 
 from __future__ import annotations

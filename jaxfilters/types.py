@@ -427,7 +427,7 @@ def robot_inputs(mask: FilterMask, poses: Any, num_robots: int, mask_index=None,
 
   Returns:
     (mask index int32 [B], index in range bool [B] (see resolve_mask_index),
-     poses float32 [B, 3], enabled bool [B], transform float32 [B, 3] or None).
+    poses float32 [B, 3], enabled bool [B], transform float32 [B, 3] or None).
 
   Raises:
     ValueError: any of them with the wrong shape or dtype, or (eager) a

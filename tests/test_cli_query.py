@@ -11,7 +11,7 @@ import pytest
 from PIL import Image
 
 from jaxfilters import cli
-from tests import reference
+from reference import nav2 as reference
 
 _KEYS = ["x", "y", "speed_limit", "speed_limit_type", "keepout_cost", "binary_state", "zone"]
 _ROOT = Path(__file__).resolve().parents[1]

@@ -18,7 +18,7 @@ import pytest
 from jaxfilters import keepout as ko
 from jaxfilters.grid import OccupancyGrid
 from jaxfilters.types import Costmap, FilterInfo, FilterMask
-from tests import reference
+from reference import nav2 as reference
 
 KEEPOUT = FilterInfo.create(0)
 B, H, W, HM, WM = 6, 12, 16, 20, 18

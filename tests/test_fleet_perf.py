@@ -26,7 +26,7 @@ from jaxfilters.keepout import KeepoutState
 from sims import local_costmap, navigation, planner
 from sims.config import FleetConfig, PlannerConfig
 from sims.env import FleetEnv
-from tests import planner_reference as ref
+from reference import planner as ref
 
 K = 6   # robots per cluster (one local costmap build)
 

@@ -9,7 +9,7 @@ import numpy as np
 from hypothesis import given, strategies as st
 
 from jaxfilters import geometry
-from tests import reference
+from reference import nav2 as reference
 
 f32 = lambda v: float(np.float32(v))
 # The guaranteed domain: |v| <= 10 km, and 0 or |v| >= 1e-30 (so no error term is subnormal).

@@ -21,7 +21,7 @@ import pytest
 import jaxfilters as jf
 from jaxfilters import footprint as fp
 from jaxfilters import keepout as ko
-from tests import reference
+from reference import nav2 as reference
 
 EPS = 2e-5            # m: undecided band of the random cases (float32 on coordinates up to ~10 m)
 KEEPOUT = jf.FilterInfo.create(0)

@@ -22,7 +22,7 @@ from jaxfilters import keepout_pallas as kp
 from jaxfilters.grid import OccupancyGrid
 from jaxfilters.keepout_pallas import PallasTuning
 from jaxfilters.types import Costmap, FilterInfo, FilterMask
-from tests import reference
+from reference import nav2 as reference
 
 INT8 = np.arange(-128, 128)
 LUT = np.asarray([reference.mask_cost(v) for v in INT8])      # mask cost of int8 d at LUT[d + 128]

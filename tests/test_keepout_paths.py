@@ -27,7 +27,7 @@ from jaxfilters import keepout as ko
 from jaxfilters import validate
 from jaxfilters.grid import OccupancyGrid
 from jaxfilters.types import Costmap, FilterInfo, FilterMask
-from tests import reference
+from reference import nav2 as reference
 
 KEEPOUT = FilterInfo.create(0)
 B, H, W, M, HM, WM = 6, 12, 16, 2, 20, 18       # one shape: each path compiles once

@@ -17,7 +17,7 @@ from PIL import Image
 from tests.compile_count import count_compiles
 import jaxfilters as jf
 from jaxfilters import nav2
-from tests import reference
+from reference import nav2 as reference
 
 _ENABLE = {"KEEPOUT_ZONE_ENABLED": "True", "SPEED_ZONE_ENABLED": "True"}
 

@@ -22,7 +22,7 @@ from sims import local_costmap, navigation, planner
 from sims.config import FleetConfig, PlannerConfig
 from sims.env import FleetEnv
 from sims.metrics import summarize
-from tests import reference
+from reference import nav2 as reference
 
 CFG = FleetConfig(robots_per_world=6, keepout_escape="footprint", robots_in_keepout=3, num_stations=8,
                   planner=PlannerConfig(inscribed_is_collision=True))

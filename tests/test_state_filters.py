@@ -8,7 +8,7 @@ import pytest
 
 import jaxfilters as jf
 from jaxfilters import speed as sp
-from tests import reference
+from reference import nav2 as reference
 
 
 def _mask(data, res, origin, ftype, base=0.0, mult=1.0):

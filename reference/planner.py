@@ -1,10 +1,11 @@
-"""The fleet planner as it was before the performance work (commit 7112e11), kept as a reference.
+"""The fleet planner in its straightforward form, kept as a reference for the optimised one.
 
-sims/planner.py and sims/navigation.py now share work between candidates, pack
+sims/planner.py and sims/navigation.py share work between candidates, pack
 the costmap rules into one table and gather through flat indices;
 tests/test_fleet_perf.py checks that they choose the same commands with the
 same scores as this straightforward version (and the navigation field lookups
-below). Copied verbatim apart from this docstring and the imports.
+below), and benchmarks/fleet_breakdown.py times it as the `reference_planner`
+variant. It shares no code with sims/planner.py.
 """
 
 from __future__ import annotations

@@ -1,4 +1,4 @@
-"""Plain float64 NumPy references of Nav2's filters, written from the spec, loop by loop.
+"""Plain float64 NumPy references of Nav2's filters, written from docs/nav2_semantics.md, loop by loop.
 
 They mirror the C++ (double arithmetic, C casts) and share no code with
 jaxfilters. Inputs are the float32 values the device sees, upcast to float64.
@@ -237,7 +237,7 @@ def footprint_in_zone(mask, mask_origin, mask_res, pose, *, polygon=None, radius
 
 
 def centre_in_zone(mask, mask_origin, mask_res, x, y):
-  """Nav2's robot-in-keepout test (spec §4.2): the centre's mask cell costs 253 or 254."""
+  """Nav2's robot-in-keepout test (docs/nav2_semantics.md §4.2): the centre's mask cell costs 253 or 254."""
   hm, wm = mask.shape
   cell = world_to_map(x, y, mask_origin[0], mask_origin[1], mask_res, wm, hm)
   return cell is not None and mask_cost(mask[cell[1], cell[0]]) in (253, 254)
