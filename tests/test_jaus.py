@@ -533,7 +533,8 @@ def test_grid_round_trip(profile, variant):
     grid = _random_grid(rng, h, w, yaw)
     if mapping == "fkie" and variant == "rle":
       continue   # 3-bit levels decode to costs above 200, outside the fkie range
-    report = J.grid_to_report(grid, profile=profile, variant=variant, mapping=mapping, axes=axes)
+    report = J.grid_to_report(grid, profile=profile, variant=variant, mapping=mapping, axes=axes,
+                              lossy=variant == "rle")
     msg = J.decode_report(J.encode_report(report))
     back = J.report_to_grid(msg, mapping=mapping, axes=axes)
     assert np.array_equal(back.data, _expected_occ(grid.data, variant, mapping))
@@ -932,7 +933,7 @@ def test_cli_wrong_arguments(tmp_path, capsys):
   (tmp_path / "hex.txt").write_text(J.to_hex(good.read_bytes()))
   (tmp_path / "attr.bin").write_bytes(_read_vector("design_report_attractiveness_local"))
   cases = [
-      (["encode", str(yaml_path), "--out", str(good)], "at most 65535 cells"),
+      (["encode", str(yaml_path), "--out", str(good), "--single"], "at most 65535 cells"),
       (["encode", str(yaml_path), "--out", str(good), "--window", "0", "0", "301", "1"],
        "--window"),
       (["encode", str(yaml_path), "--out", str(good), "--window", "0", "0", "x", "1"],
@@ -944,7 +945,7 @@ def test_cli_wrong_arguments(tmp_path, capsys):
       (["encode", str(yaml_path), "--out", str(good), "--profile", "v2"], "invalid choice"),
       (["encode", str(tmp_path / "nope.yaml"), "--out", str(good)], "does not exist"),
       (["encode", str(yaml_path), "--out", str(tmp_path / "no" / "x.bin"), "--window", "0",
-        "0", "1", "1"], "cannot write"),
+        "0", "4", "4"], "cannot write"),
       (["encode", str(yaml_path)], "--out"),
       (["decode", str(tmp_path / "nope.bin"), "--out", str(tmp_path / "x.yaml")], "cannot read"),
       (["decode", str(tmp_path / "short.bin"), "--out", str(tmp_path / "x.yaml")],
