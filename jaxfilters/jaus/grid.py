@@ -39,7 +39,7 @@ import numpy as np
 from jaxfilters import constants
 from jaxfilters.grid import OccupancyGrid
 from jaxfilters.jaus.messages import (CENTER_X, RLE_LEVEL_COST, ROTATION, CostMap2DReport,
-                                      GlobalPose, JausProfile, LocalPose, check_choice,
+                                      GlobalPose, JausProfile, LocalPose, apply_lut, check_choice,
                                       check_report, get_profile, limit_problem, rle_runs,
                                       size_field)
 from jaxfilters.map_decode import MAX_MAP_CELLS
@@ -48,6 +48,11 @@ from jaxfilters.validate import float32_values, int_values, resolution_value, sh
 # Occupancy -> cost mappings and the report axes conventions.
 MAPPINGS = ("nav2", "fkie")
 AXES = ("ros", "ned")
+# cost -> occupancy tables (index = cost 0..255): round_half_up(c * 100 / 254) and c // 2,
+# 255 -> -1; _REFUSED marks the costs 201..254 the fkie mapping cannot turn into occupancy.
+_REFUSED = -2
+_NAV2_OCC = np.array([(c * 200 + 254) // 508 for c in range(255)] + [-1], np.int8)
+_FKIE_OCC = np.array([c // 2 if c <= 200 else _REFUSED for c in range(255)] + [-1], np.int8)
 
 # --------------------------------------------------------------------------- value mappings
 
@@ -90,16 +95,14 @@ def cost_to_occupancy(cost, *, mapping: str = "nav2") -> np.ndarray:
       fkie client would turn into an occupancy above 100.
   """
   check_choice("mapping", mapping, MAPPINGS)
-  c = int_values(cost, "cost", lo=0, hi=255).astype(np.int32)
-  if mapping == "nav2":
-    occ = (c * 200 + 254) // 508
-  else:
-    bad = (c > 200) & (c != constants.NO_INFORMATION)
-    if np.any(bad):
+  c = int_values(cost, "cost", lo=0, hi=255)
+  occ = apply_lut(_NAV2_OCC if mapping == "nav2" else _FKIE_OCC, c)
+  if mapping == "fkie":
+    bad = occ == _REFUSED
+    if bad.any():
       raise ValueError(f"the fkie mapping covers costs 0..200 (occupancy * 2) and 255; got cost "
                        f"{int(c[bad].flat[0])} ({int(bad.sum())} cells); use mapping='nav2'")
-    occ = c // 2
-  return np.where(c == constants.NO_INFORMATION, -1, occ).astype(np.int8)
+  return occ
 
 
 def cost_to_rle_level(cost) -> np.ndarray:
@@ -464,7 +467,7 @@ def report_to_grid(report: CostMap2DReport, *, mapping: str = "nav2", axes: str 
       disagrees with the message; a GlobalPose report without `center`; costs
       the mapping cannot turn into occupancy ("fkie" and a cost 201..254).
   """
-  prof = check_report(report)
+  prof = check_report(report, count_runs=False)
   check_choice("mapping", mapping, MAPPINGS)
   check_choice("axes", axes, AXES)
   if report.rows == 0 or report.cols == 0:
@@ -549,7 +552,7 @@ def reports_to_grid(reports: Iterable[CostMap2DReport], *, mapping: str = "nav2"
     if not isinstance(rep, CostMap2DReport):
       raise TypeError(f"reports_to_grid expects CostMap2DReport tiles; tile {i} is a "
                       f"{type(rep).__name__}")
-    prof = check_report(rep)
+    check_report(rep, count_runs=False)
     if not isinstance(rep.pose, LocalPose):
       raise ValueError(f"tile {i} gives its centre as latitude/longitude; tiles are placed by "
                        "local centres (decode it alone with report_to_grid(..., center=...))")

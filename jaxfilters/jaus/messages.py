@@ -39,6 +39,17 @@ U16_MAX = 0xFFFF
 RLE_MAX_RUN = 4095                 # the 12-bit NumberCellsSubField
 # Nav2 cost each 3-bit run-length level decodes to: round(q * 254 / 7).
 RLE_LEVEL_COST = np.array([0, 36, 73, 109, 145, 181, 218, 254], np.uint8)
+# Cells converted at a time by table lookups (bounds the temporaries of a large grid).
+LUT_BLOCK = 1 << 20
+
+
+def apply_lut(table: np.ndarray, index: np.ndarray) -> np.ndarray:
+  """table[index] computed a block of `LUT_BLOCK` cells at a time (same shape as index)."""
+  out = np.empty(index.shape, table.dtype)
+  flat, src = out.reshape(-1), np.ascontiguousarray(index).reshape(-1)
+  for i in range(0, flat.size, LUT_BLOCK):
+    flat[i:i + LUT_BLOCK] = table[src[i:i + LUT_BLOCK]]
+  return out
 
 
 
@@ -305,7 +316,15 @@ class CostMap2DReport:
       unknown = (self.confidence == 0) | (self.values == constants.NO_INFORMATION)
       return np.where(unknown, np.uint8(constants.NO_INFORMATION), self.values)
     if self.variant == "rle":
-      return np.where(self.known, RLE_LEVEL_COST[self.values], np.uint8(constants.NO_INFORMATION))
+      # Index (certainty << 3 | level) into one 16-entry table, a block at a time, so a
+      # decoded grid at the cell cap needs no temporary larger than a block.
+      table = np.concatenate([np.full(8, constants.NO_INFORMATION, np.uint8), RLE_LEVEL_COST])
+      out = np.empty(self.values.shape, np.uint8)
+      flat, levels, known = out.reshape(-1), self.values.reshape(-1), self.known.reshape(-1)
+      for i in range(0, flat.size, LUT_BLOCK):
+        j = i + LUT_BLOCK
+        flat[i:j] = table[(levels[i:j] & 7) | (known[i:j].view(np.uint8) << 3)]
+      return out
     raise ValueError("CostOrAttractiveness values have no public definition (sign convention and "
                      "reserved values are unknown), so they cannot be read as Nav2 costs; use "
                      "report.values for the raw bytes")
@@ -410,8 +429,12 @@ def limit_problem(profile: JausProfile, variant: str, rows: int, cols: int,
   return None
 
 
-def check_report(report: CostMap2DReport) -> JausProfile:
-  """Checks a report field by field (as `create` does); returns its profile."""
+def check_report(report: CostMap2DReport, *, count_runs: bool = True) -> JausProfile:
+  """Checks a report field by field (as `create` does); returns its profile.
+
+  `count_runs=False` skips counting the runs of an "rle" report against the
+  65535-run limit, which matters only for encoding it (a pass over every cell).
+  """
   prof = get_profile(report.profile)
   if report.variant not in prof.variants:
     raise ValueError(f"variant must be one of {prof.variants} for profile {prof.name!r}; "
@@ -449,7 +472,7 @@ def check_report(report: CostMap2DReport) -> JausProfile:
                     f"{type(report.pose).__name__}")
   for label, value in (("MapWidth", report.map_width), ("MapHeight", report.map_height)):
     size_field(prof, label).check(value, "CostMap2DReport")
-  runs = len(rle_runs(v, report.known)) if report.variant == "rle" else None
+  runs = len(rle_runs(v, report.known)) if report.variant == "rle" and count_runs else None
   problem = limit_problem(prof, report.variant, *v.shape, 0.0, 0.0, runs)
   if problem:
     raise ValueError(f"CostMap2DReport too large for one message: {problem}; encode a window of "
