@@ -414,8 +414,8 @@ def read_message_file(path, *, hex: bool = False) -> bytes:
   try:
     return from_hex(raw.decode("ascii"))
   except (UnicodeDecodeError, ValueError) as e:
-    raise JausDecodeError(None, f"{what} {path} is not hex text ({str(e)[:120]}); read it "
-                          "without hex for raw bytes") from None
+    raise JausDecodeError(None, f"{what} {path} is not hex text ({str(e)[:120]}); for raw "
+                          "bytes drop --hex (hex=False)") from None
 
 
 _HEX_CHARS = frozenset(b"0123456789abcdefABCDEF \t\r\n")
