@@ -33,7 +33,8 @@ import numpy as np
 
 from jaxfilters import constants
 from jaxfilters.grid import OccupancyGrid
-from jaxfilters.jaus.costs import MAPPINGS, cost_to_occupancy, cost_to_rle_level, occupancy_to_cost
+from jaxfilters.jaus.costs import (MAPPINGS, cost_to_occupancy, cost_to_rle_level,
+                                   occupancy_to_cost)
 from jaxfilters.jaus.messages import (CENTER_X, RLE_LEVEL_COST, ROTATION, CostMap2DReport,
                                       GlobalPose, JausProfile, LocalPose, check_choice,
                                       check_report, get_profile, limit_problem, rle_runs,
@@ -185,7 +186,7 @@ def grid_to_reports(grid: OccupancyGrid, *, window=None, profile: str = "iop",
       None for the whole grid. Must lie inside the grid (never clipped).
     profile: "iop" or "design".
     variant: "list", "confidence" or "rle".
-    mapping: "nav2" or "fkie" occupancy -> cost (module docstring).
+    mapping: "nav2" or "fkie" occupancy -> cost (`jaxfilters.jaus.costs`).
     axes: "ros" or "ned" (module docstring).
     pose: a GlobalPose to send instead of the local pose computed from the
       grid's origin (single message only: tile centres cannot be derived).
@@ -408,7 +409,10 @@ def report_to_grid(report: CostMap2DReport, *, mapping: str = "nav2", axes: str 
       raise ValueError(f"MapWidth {report.map_width:.6g} m and MapHeight {report.map_height:.6g} m "
                        f"for {report.cols} x {report.rows} cells: the sizes are 0 on the wire, so "
                        "the cell size cannot be told; pass resolution= (metres per cell)")
-    res = _simplest(lo, hi, (lo + hi) / 2, positive=True) if snap else report.map_width / report.cols
+    if snap:
+      res = _simplest(lo, hi, (lo + hi) / 2, positive=True)
+    else:
+      res = report.map_width / report.cols
     resolution_value(res, owner="report_to_grid (MapWidth / NumberOfColumns)")
   if center is not None:
     if np.shape(center) != (3,):

@@ -69,7 +69,8 @@ def _pack_pose(pose: Pose) -> bytes:
     return struct.pack("<BIIH", 0, LATITUDE.encode(pose.latitude, "GlobalPose"),
                        LONGITUDE.encode(pose.longitude, "GlobalPose"),
                        ROTATION.encode(pose.rotation, "GlobalPose"))
-  return struct.pack("<BIIH", 1, CENTER_X.encode(pose.x, "LocalPose"), CENTER_Y.encode(pose.y, "LocalPose"),
+  return struct.pack("<BIIH", 1, CENTER_X.encode(pose.x, "LocalPose"),
+                     CENTER_Y.encode(pose.y, "LocalPose"),
                      ROTATION.encode(pose.rotation, "LocalPose"))
 
 
