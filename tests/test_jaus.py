@@ -534,7 +534,7 @@ def test_grid_round_trip(profile, variant):
     if mapping == "fkie" and variant == "rle":
       continue   # 3-bit levels decode to costs above 200, outside the fkie range
     report = J.grid_to_report(grid, profile=profile, variant=variant, mapping=mapping, axes=axes,
-                              lossy=variant == "rle")
+                              lossy=variant == "rle", check_resolution=profile == "design")
     msg = J.decode_report(J.encode_report(report))
     back = J.report_to_grid(msg, mapping=mapping, axes=axes)
     assert np.array_equal(back.data, _expected_occ(grid.data, variant, mapping))

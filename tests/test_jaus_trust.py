@@ -66,17 +66,27 @@ def test_iop_map_whose_size_rounds_to_zero_is_refused_by_the_encoder():
   with pytest.raises(ValueError, match=r"could not tell the cell size; use profile 'design'"):
     J.grid_to_report(grid)
   assert _round_trip(grid, profile="design").resolution == 0.05
-  # Every small iop map is either refused at encode or read back by the decoder.
-  for h in range(1, 6):
-    for w in range(1, 6):
-      for res in (0.01, 0.05, 0.1):
+  # 2 x 2 cells of 0.05 m: MapWidth 0.1 m goes out as 0.153 m, and the decoder's shortest
+  # decimal in [0.038, 0.153] m per cell is 0.1 m; the encoder refuses instead.
+  two = OccupancyGrid.create(np.zeros((2, 2), np.int8), 0.05)
+  with pytest.raises(ValueError, match=r"would read the cell size .* as 0.1 m, not 0.05 m"):
+    J.grid_to_report(two)
+  report = J.grid_to_report(two, check_resolution=False)    # the receiver is told 0.05 m
+  assert J.report_to_grid(J.decode(J.encode_report(report)), resolution=0.05).resolution == 0.05
+  # Every small iop map is either refused at encode or read back with its own resolution.
+  kept = 0
+  for h in range(1, 9):
+    for w in range(1, 9):
+      for res in (0.01, 0.05, 0.1, 0.5, 1.0):
         g = OccupancyGrid.create(np.zeros((h, w), np.int8), res)
         try:
           report = J.grid_to_report(g)
         except ValueError as e:
-          assert "could not tell the cell size" in str(e)
+          assert "could not tell the cell size" in str(e) or "would read the cell size" in str(e)
           continue
-        J.report_to_grid(J.decode(J.encode_report(report)))
+        assert J.report_to_grid(J.decode(J.encode_report(report))).resolution == res
+        kept += 1
+  assert kept > 50
 
 
 def test_peer_message_with_zero_sizes_needs_the_resolution():

@@ -134,6 +134,33 @@ def _check_size_recoverable(prof: JausProfile, res: float, map_w: float, map_h: 
         f"{need} cells wide or high")
 
 
+def _check_resolution_recovered(prof: JausProfile, res: float,
+                                reports: list[CostMap2DReport]) -> None:
+  """Refuses reports from which the decoder's snapped resolution is not `res`.
+
+  The decoder (`reports_to_grid`, `report_to_grid` for one report) takes the
+  shortest decimal inside every report's interval of cell sizes; it must equal
+  the grid's resolution to float32 precision (the filters compute in float32).
+  """
+  size = size_field(prof, "MapWidth")
+  bounds = []
+  for r in reports:
+    w = size.decode(size.encode(r.map_width, "grid_to_reports"))
+    h = size.decode(size.encode(r.map_height, "grid_to_reports"))
+    bounds.append(resolution_interval(prof, w, h, r.rows, r.cols))
+  lo, hi = max(b[0] for b in bounds), min(b[1] for b in bounds)
+  got = _simplest(lo, hi, (lo + hi) / 2, positive=True) if 0.0 < lo <= hi else None
+  if got is not None and abs(got - res) <= res * 2.0 ** -20:
+    return
+  cells = max(r.cols for r in reports), max(r.rows for r in reports)
+  raise ValueError(
+      f"the receiver would read the cell size of this {cells[0]} x {cells[1]} cell map (width x "
+      f"height) as {got if got is not None else 'unknown'} m, not {res:g} m: profile "
+      f"{prof.name!r} sends MapWidth/MapHeight in {size.step:.4g} m steps; use profile 'design' "
+      f"({size_field(get_profile('design'), 'MapWidth').step:.2g} m steps), a larger window, or "
+      "check_resolution=False if the receiver is given the resolution")
+
+
 def _check_rle_exact(grid: OccupancyGrid, win, mapping: str) -> None:
   """Refuses a grid whose costs the run-length list would change (lossy=False)."""
   col, row, width, height = win
@@ -177,7 +204,7 @@ def grid_to_reports(grid: OccupancyGrid, *, window=None, profile: str = "iop",
                     variant: str = "list", mapping: str = "nav2", axes: str = "ros",
                     pose: GlobalPose | None = None, confidence=None,
                     tiles: bool | Callable[[int, int], tuple[int, int]] = False,
-                    lossy: bool = False) -> list[JausTile]:
+                    lossy: bool = False, check_resolution: bool = True) -> list[JausTile]:
   """An OccupancyGrid (or a window of it) -> ReportCostMap2D messages.
 
   Args:
@@ -200,6 +227,11 @@ def grid_to_reports(grid: OccupancyGrid, *, window=None, profile: str = "iop",
       Without it a grid with a cost outside `RLE_LEVEL_COST` is refused (the
       error names the first cell and the values); the other variants are
       lossless and ignore it.
+    check_resolution: refuse a map whose cell size `report_to_grid` (or
+      `reports_to_grid` for tiles) would not read back from MapWidth and
+      MapHeight: with "iop" sizes (0.153 m steps) a 2 x 2 map of 0.05 m cells
+      would come back with 0.1 m cells. False: the receiver is given the
+      resolution another way (`report_to_grid(..., resolution=)`).
 
   Returns:
     [JausTile(window, report)], one per message, each with its own centre.
@@ -209,8 +241,9 @@ def grid_to_reports(grid: OccupancyGrid, *, window=None, profile: str = "iop",
       large for one message (the message names the limit: 65535 cells in a
       list, 65535 runs, 65535 rows or columns, 10000 m); a centre outside
       +-100000 m; a map so small that its size rounds to 0 m on the wire (the
-      receiver could not tell the cell size; docs/jaus.md §11 (4)); "rle"
-      costs that need `lossy=True`.
+      receiver could not tell the cell size; docs/jaus.md §11 (4)); with
+      `check_resolution`, a map whose cell size the receiver would read as
+      another value (docs/jaus.md §11 (9)); "rle" costs that need `lossy=True`.
     NotImplementedError: variant "attractiveness".
   """
   prof = get_profile(profile)
@@ -222,8 +255,9 @@ def grid_to_reports(grid: OccupancyGrid, *, window=None, profile: str = "iop",
   if variant == "attractiveness":
     raise NotImplementedError("encoding CostOrAttractivenessList is refused: no public text "
                               "defines its values (sign convention, reserved values)")
-  if not isinstance(lossy, bool):
-    raise ValueError(f"lossy must be True or False; got {short_repr(lossy)}")
+  for name, flag in (("lossy", lossy), ("check_resolution", check_resolution)):
+    if not isinstance(flag, bool):
+      raise ValueError(f"{name} must be True or False; got {short_repr(flag)}")
   res, origin = _grid_geometry(grid, "grid_to_reports")
   win = _check_window(grid, window)
   if variant == "rle" and not lossy:
@@ -296,8 +330,11 @@ def grid_to_reports(grid: OccupancyGrid, *, window=None, profile: str = "iop",
   if pose is not None and len(windows) > 1:
     raise ValueError("a GlobalPose can only be sent with a single message; tile centres would "
                      "need a geodetic projection of the grid")
-  return [JausTile(w, _window_report(grid, w, res, origin, prof, variant, mapping, axes, pose,
-                                     confidence)) for w in windows]
+  out = [JausTile(w, _window_report(grid, w, res, origin, prof, variant, mapping, axes, pose,
+                                    confidence)) for w in windows]
+  if check_resolution:
+    _check_resolution_recovered(prof, res, [t.report for t in out])
+  return out
 
 
 def grid_to_report(grid: OccupancyGrid, **options) -> CostMap2DReport:
