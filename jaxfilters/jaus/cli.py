@@ -123,12 +123,12 @@ def run_encode(args) -> int:
   data = b"".join(jaus.encode_report(t.report) for t in tiles)
   _write_output(args.out, jaus.to_hex(data) if args.hex else data)
   prof = jaus.PROFILES[args.profile]
-  rows = sum(t.report.rows * t.report.cols for t in tiles)
+  cells = sum(t.report.rows * t.report.cols for t in tiles)
   what = ("1 message" if len(tiles) == 1 else
           f"{len(tiles)} messages (tiles, back to back; the map needs more than one)")
   print(f"wrote {args.out}: ReportCostMap2D 0x{prof.report_id:04X} ({args.profile}), "
         f"{args.variant}, {what}, {grid.width if args.window is None else args.window[2]} x "
-        f"{grid.height if args.window is None else args.window[3]} cells ({rows} in all), "
+        f"{grid.height if args.window is None else args.window[3]} cells ({cells} in all), "
         f"{len(data)} bytes" + (", costs quantised to 3-bit levels" if args.variant == "rle"
                                 else ""))
   return EXIT_OK
