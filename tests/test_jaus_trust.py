@@ -137,6 +137,11 @@ def test_cap_is_a_budget_over_all_messages_of_a_file():
   assert err.value.offset == 2 * len(one) + 2
   with pytest.raises(J.JausDecodeError, match="no message"):
     J.decode_all(b"")
+  empty_query = bytes.fromhex("38d700")
+  assert len(J.decode_all(empty_query * J.MAX_MESSAGES)) == J.MAX_MESSAGES
+  with pytest.raises(J.JausDecodeError, match="more than MAX_MESSAGES") as err:
+    J.decode_all(empty_query * 10**6)     # 3 MB: a million objects without the cap
+  assert err.value.offset == 3 * J.MAX_MESSAGES
   with pytest.raises(J.JausDecodeError, match="needs 6 bytes, only 5 left") as err:
     J.decode_all(one + one[:-1])
   assert err.value.offset >= len(one)

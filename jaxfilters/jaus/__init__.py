@@ -33,14 +33,15 @@ from jaxfilters.jaus.grid import (AXES, JausTile, grid_to_report, grid_to_report
                                   reports_to_grid)
 from jaxfilters.jaus.messages import (PROFILES, RLE_LEVEL_COST, VARIANTS, CostMap2DQuery,
                                       CostMap2DReport, GlobalPose, JausProfile, LocalPose)
-from jaxfilters.jaus.wire import (MAX_FILE_BYTES, JausDecodeError, decode, decode_all,
-                                  decode_query, decode_report, encode_query, encode_report,
-                                  from_hex, fuzz_target, load_messages, read_message_file, to_hex)
+from jaxfilters.jaus.wire import (MAX_FILE_BYTES, MAX_MESSAGES, JausDecodeError, decode,
+                                  decode_all, decode_query, decode_report, encode_query,
+                                  encode_report, from_hex, fuzz_target, load_messages,
+                                  read_message_file, to_hex)
 from jaxfilters.map_decode import MAX_MAP_CELLS
 
 __all__ = [
-    "AXES", "MAPPINGS", "MAX_FILE_BYTES", "MAX_MAP_CELLS", "PROFILES", "RLE_LEVEL_COST",
-    "VARIANTS", "CostMap2DQuery", "CostMap2DReport", "GlobalPose", "JausDecodeError",
+    "AXES", "MAPPINGS", "MAX_FILE_BYTES", "MAX_MAP_CELLS", "MAX_MESSAGES", "PROFILES",
+    "RLE_LEVEL_COST", "VARIANTS", "CostMap2DQuery", "CostMap2DReport", "GlobalPose", "JausDecodeError",
     "JausProfile", "JausTile", "LocalPose", "cost_to_occupancy", "cost_to_rle_level", "decode",
     "decode_all", "decode_query", "decode_report", "encode_query", "encode_report", "from_hex",
     "fuzz_target", "grid_to_report", "grid_to_reports", "load_messages", "occupancy_to_cost",

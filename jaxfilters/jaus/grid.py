@@ -421,6 +421,13 @@ def report_to_grid(report: CostMap2DReport, *, mapping: str = "nav2", axes: str 
       disagrees with the message; a GlobalPose report without `center`; costs
       the mapping cannot turn into occupancy ("fkie" and a cost 201..254).
   """
+  occ, res, origin = _report_cells(report, mapping, axes, resolution, center, snap)
+  return OccupancyGrid.create(occ, res, origin, frame_id)
+
+
+def _report_cells(report: CostMap2DReport, mapping: str, axes: str, resolution, center,
+                  snap: bool, *, resolution_checked: bool = False):
+  """report_to_grid without building the grid: (int8 [rows, cols] grid order, res, origin)."""
   prof = check_report(report, count_runs=False)
   check_choice("mapping", mapping, MAPPINGS)
   check_choice("axes", axes, AXES)
@@ -431,7 +438,8 @@ def report_to_grid(report: CostMap2DReport, *, mapping: str = "nav2", axes: str 
   lo, hi = resolution_interval(prof, report.map_width, report.map_height, report.rows,
                                report.cols)
   if resolution is not None:
-    resolution_value(resolution, owner="report_to_grid")
+    if not resolution_checked:
+      resolution_value(resolution, owner="report_to_grid")
     res = float(resolution)
     if not lo - 1e-12 <= res <= hi + 1e-12:
       raise ValueError(f"resolution {res!r} disagrees with the message: MapWidth {report.map_width:.6g} m "
@@ -468,8 +476,7 @@ def report_to_grid(report: CostMap2DReport, *, mapping: str = "nav2", axes: str 
   if snap and center is None:
     # The centre's error carries over to the origin unchanged (same rotation and size).
     ox, oy = (_simplest(*_tolerance(v, CENTER_X.step), v) for v in (ox, oy))
-  return OccupancyGrid.create(occ, res, (ox, oy, yaw), frame_id)
-
+  return occ, res, (ox, oy, yaw)
 
 
 def reports_to_grid(reports: Iterable[CostMap2DReport], *, mapping: str = "nav2",
@@ -509,14 +516,12 @@ def reports_to_grid(reports: Iterable[CostMap2DReport], *, mapping: str = "nav2"
     if not isinstance(rep, CostMap2DReport):
       raise TypeError(f"reports_to_grid expects CostMap2DReport tiles; tile {i} is a "
                       f"{type(rep).__name__}")
-    check_report(rep, count_runs=False)
     if not isinstance(rep.pose, LocalPose):
       raise ValueError(f"tile {i} gives its centre as latitude/longitude; tiles are placed by "
                        "local centres (decode it alone with report_to_grid(..., center=...))")
-    if rep.rows == 0 or rep.cols == 0:
-      raise ValueError(f"tile {i} has {rep.rows} rows x {rep.cols} columns; every tile needs at "
-                       "least one cell")
-  if resolution is None:
+  if resolution is not None:
+    resolution_value(resolution, owner="reports_to_grid")
+  else:
     bounds = [resolution_interval(get_profile(r.profile), r.map_width, r.map_height, r.rows,
                                   r.cols) for r in reports]
     lo, hi = max(b[0] for b in bounds), min(b[1] for b in bounds)
@@ -531,38 +536,37 @@ def reports_to_grid(reports: Iterable[CostMap2DReport], *, mapping: str = "nav2"
     else:
       big = max(reports, key=lambda r: r.cols)
       resolution = big.map_width / big.cols
-  grids = [report_to_grid(r, mapping=mapping, axes=axes, resolution=resolution, snap=snap,
-                          frame_id=frame_id) for r in reports]
-  res, yaw = grids[0].resolution, grids[0].origin[2]
-  x0, y0 = grids[0].origin[:2]
+  cells = [_report_cells(r, mapping, axes, resolution, None, snap, resolution_checked=True)
+           for r in reports]
+  res, (x0, y0, yaw) = cells[0][1], cells[0][2]
   places = []
-  for i, g in enumerate(grids):
-    if abs(math.remainder(g.origin[2] - yaw, 2 * math.pi)) > 1.5 * ROTATION.step:
-      raise ValueError(f"tile {i} is rotated by {g.origin[2]:.6g} rad and tile 0 by {yaw:.6g} "
+  for i, (occ, _, (ox, oy, oyaw)) in enumerate(cells):
+    if abs(math.remainder(oyaw - yaw, 2 * math.pi)) > 1.5 * ROTATION.step:
+      raise ValueError(f"tile {i} is rotated by {oyaw:.6g} rad and tile 0 by {yaw:.6g} "
                        "rad; tiles of one map share one rotation")
-    u, v = _rot(-yaw, g.origin[0] - x0, g.origin[1] - y0)
+    u, v = _rot(-yaw, ox - x0, oy - y0)
     u, v = u / res, v / res
     iu, iv = round(u), round(v)
     if abs(u - iu) > 0.25 or abs(v - iv) > 0.25:
       raise ValueError(f"tile {i} starts {u:.3f} x {v:.3f} cells from tile 0's corner, not on a "
                        "cell corner of its grid; the tiles are not of one map")
-    places.append((iu, iv, g))
+    places.append((iu, iv, occ))
   c0, r0 = min(p[0] for p in places), min(p[1] for p in places)
-  width = max(p[0] + p[2].width for p in places) - c0
-  height = max(p[1] + p[2].height for p in places) - r0
+  width = max(p[0] + p[2].shape[1] for p in places) - c0
+  height = max(p[1] + p[2].shape[0] for p in places) - r0
   if width * height > max_cells:
     raise ValueError(f"the tiles span {width} x {height} = {width * height} cells (width x "
                      f"height), more than max_cells={max_cells} (MAX_MAP_CELLS unless given)")
   data = np.full((height, width), -1, np.int8)
   covered = np.zeros((height, width), bool)
-  for i, (iu, iv, g) in enumerate(places):
-    rows = slice(iv - r0, iv - r0 + g.height)
-    cols = slice(iu - c0, iu - c0 + g.width)
+  for i, (iu, iv, occ) in enumerate(places):
+    rows = slice(iv - r0, iv - r0 + occ.shape[0])
+    cols = slice(iu - c0, iu - c0 + occ.shape[1])
     if covered[rows, cols].any():
       raise ValueError(f"tile {i} overlaps an earlier tile; the tiles of one map cover each cell "
                        "once")
     covered[rows, cols] = True
-    data[rows, cols] = np.asarray(g.data)
+    data[rows, cols] = occ
   dx, dy = _rot(yaw, c0 * res, r0 * res)
   ox, oy = x0 + dx, y0 + dy
   if snap:

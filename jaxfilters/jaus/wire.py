@@ -42,6 +42,10 @@ from jaxfilters.map_decode import MAX_MAP_CELLS, read_regular_file
 # cost-and-confidence list (2 bytes a cell) plus 1 MiB for the message headers of its tiles.
 # Hex text takes three characters a byte, so a hex file may be three times as large.
 MAX_FILE_BYTES = 2 * MAX_MAP_CELLS + (1 << 20)
+# The most messages `decode_all` reads from one buffer: a map at the cell cap needs about 2048
+# tiles of 32768 cells; 3-byte empty queries could otherwise make millions of objects, and tiny
+# tiles seconds of work each thousand.
+MAX_MESSAGES = 4096
 
 
 class JausDecodeError(ValueError):
@@ -318,13 +322,15 @@ def decode_all(data: bytes, *, max_cells: int | None = MAX_MAP_CELLS
     data: bytes of at least one complete message.
     max_cells: cap on the cells of all reports together (checked before each
       report's cells are allocated); `MAX_MAP_CELLS` by default, None for no cap.
+      At most `MAX_MESSAGES` messages are read.
 
   Returns:
     The decoded messages.
 
   Raises:
     JausDecodeError: no bytes, or anything `decode` refuses in any message
-      (offsets count from the start of `data`); a last message cut short.
+      (offsets count from the start of `data`); a last message cut short;
+      more than `MAX_MESSAGES` messages.
     TypeError: data that is not bytes-like.
   """
   _check_cap(max_cells)
@@ -333,6 +339,9 @@ def decode_all(data: bytes, *, max_cells: int | None = MAX_MAP_CELLS
     raise JausDecodeError(0, "no message: the input is empty")
   out, left = [], max_cells
   while r.left():
+    if len(out) == MAX_MESSAGES:
+      raise JausDecodeError(r.pos, f"more than MAX_MESSAGES = {MAX_MESSAGES} messages; a map at "
+                            "the cell cap needs about 2048 tiles")
     msg = _read_message(r, left)
     if left is not None and isinstance(msg, CostMap2DReport):
       left -= msg.rows * msg.cols
