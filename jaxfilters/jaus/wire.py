@@ -20,8 +20,9 @@ and against the count (a run-length list describes at most 4095 cells per
 Files (`read_message_file`, `load_messages`) hold one message or several
 back to back (the tiles of a map larger than one message, docs/jaus.md §12),
 raw or as hex text. Only regular files of at most `MAX_FILE_BYTES` (raw;
-three times that as hex) are read, so a FIFO or a device fails at once; every
-problem with the file is a `JausDecodeError` too, with `offset` None.
+three times that as hex) holding at most `MAX_MESSAGES` messages are read, so
+a FIFO or a device fails at once; every problem with the file is a
+`JausDecodeError` too, with `offset` None.
 """
 
 from __future__ import annotations
