@@ -62,7 +62,7 @@ from PIL import Image
 
 from jaxfilters.grid import OccupancyGrid
 from jaxfilters.map_io import load_map, load_map_image
-from tests import fuzz_params
+from tests import fuzz_jaus, fuzz_params
 
 OK_OUTCOMES = ("loaded", "ValueError", "FileNotFoundError")
 MAX_MESSAGE = 1000
@@ -498,30 +498,14 @@ def _yaml_expected(settings: dict) -> Callable[[], np.ndarray]:
                                 free_thresh=settings["free_thresh"], negate=settings["negate"])
 
 
-def run_jaus(data: bytes):
-  """JAUS CostMap2D bytes -> decoded message -> (a report) OccupancyGrid; only ValueError escapes."""
-  from jaxfilters import jaus
-  msg = jaus.decode(data, max_cells=1 << 22)
-  # CostOrAttractiveness has no cost meaning (documented): decoding it is the whole test.
-  if isinstance(msg, jaus.CostMap2DReport) and msg.variant != "attractiveness":
-    centre = (0.0, 0.0, 0.0) if isinstance(msg.pose, jaus.GlobalPose) else None
-    return jaus.report_to_grid(msg, center=centre)
-  return None
-
-
-def jaus_seeds() -> list[bytes]:
-  from jaxfilters import jaus
-  folder = Path(__file__).resolve().parent / "vectors" / "jaus"
-  return [jaus.from_hex(p.read_text()) for p in sorted(folder.glob("*.hex"))]
-
-
 TARGETS: dict[str, Target] = {
     "yaml": Target(run_yaml, lambda: [Seed(d, _yaml_expected(s)) for d, s in yaml_seeds()],
                    yaml_edit),
     "pgm": Target(run_image, lambda: [Seed(d, _image_expected(d)) for d in pgm_seeds()], pgm_edit),
     "png": Target(run_image, lambda: [Seed(d, _image_expected(d)) for d in png_seeds()], png_edit),
     "bmp": Target(run_image, lambda: [Seed(d, _image_expected(d)) for d in bmp_seeds()], bmp_edit),
-    "jaus": Target(run_jaus, lambda: [Seed(d) for d in jaus_seeds()]),
+    "jaus": Target(fuzz_jaus.run_bytes, fuzz_jaus.seeds, fuzz_jaus.edit),
+    "jaus-file": Target(fuzz_jaus.run_file, fuzz_jaus.file_seeds, fuzz_jaus.edit),
     "params": Target(fuzz_params.run, fuzz_params.seeds, fuzz_params.edit),
 }
 

@@ -3,7 +3,7 @@
 Golden vectors (tests/vectors/jaus/) are built here field by field from the
 layout with `struct.pack` and exact rational rounding, never by the codec; the
 tests check the files, encode the documented values to exactly those bytes and
-decode the bytes back to the documented values. The note's §9 examples are
+decode the bytes back to the documented values. The examples of docs/jaus.md §9 are
 copied as printed. Regenerate the vector files and their README with:
 
     PYTHONPATH=$PWD python -m tests.test_jaus
@@ -47,7 +47,7 @@ def q(value: float, lo: float, hi: float, bits: int) -> int:
 
 
 def rle_level(cost: int) -> int:
-  """The note's class-keeping 3-bit quantization (§4), written as plain branches."""
+  """The class-keeping 3-bit quantization of docs/jaus.md §4, written as plain branches."""
   if cost == 0:
     return 0
   if cost >= 254:
@@ -122,7 +122,7 @@ CASES = {
     "design_query_empty": {"msg": "query", "profile": "design"},
 }
 
-# The note's §9 worked examples, as printed there (made with the note author's own script).
+# The worked examples of docs/jaus.md §9, as printed there.
 SPEC_EXAMPLES = {
     "spec_example1_design_list":
         "114c0200030095d40900b98d060001931804805eeffe7fff9f0006000000feff0a0a",
@@ -243,7 +243,7 @@ One message per `.hex` file: the JAUS message from its uint16 MessageID on
 (no JUDP/transport header), as lower-case hex byte pairs separated by spaces
 and newlines (`bytes.fromhex(text)` reads it). Every multi-byte integer is
 **little-endian**; fields are packed without padding. Layout, profiles and
-scaling: /work/shared/spec/jaus_costmap2d.md ("the note") and jaxfilters/jaus.py.
+scaling: docs/jaus.md and the package jaxfilters/jaus/.
 
 Profiles: `iop` = QueryCostMap2D 0xD738 / ReportCostMap2D 0xD742, MapWidth and
 MapHeight uint16; `design` = 0x2C11 / 0x4C11, MapWidth and MapHeight uint32
@@ -267,7 +267,7 @@ may cross rows).
 tables below) and checks that each file equals that construction, that
 jaxfilters.jaus encodes the documented values to exactly these bytes (except
 the attractiveness vector, whose encoding is refused) and decodes the bytes
-back to them. The `spec_*` files are the note's §9 worked
+back to them. The `spec_*` files are the docs/jaus.md §9 worked
 examples copied as printed. Regenerate with
 `PYTHONPATH=$PWD python -m tests.test_jaus` (then review the diff).
 """
@@ -293,7 +293,7 @@ def readme_text() -> str:
       n = struct.calcsize(fmt)
       parts.append(f"| {at}-{at + n - 1} | {fname} | `{fmt}` | {_show(value)} | {meaning} |\n")
       at += n
-  parts.append("\n## The note's worked examples\n\n")
+  parts.append("\n## The worked examples of docs/jaus.md §9\n\n")
   for name, text in SPEC_EXAMPLES.items():
     parts.append(f"- `{name}.hex`: `{text}`\n")
   parts.append("\nExamples 1 and 3 carry costs [[0, 0, 254], [255, 10, 10]] (2 rows x 3 columns), "
@@ -356,8 +356,8 @@ def test_every_vector_file_is_documented_and_built_field_by_field():
   assert (VECTOR_DIR / "README.md").read_text(encoding="utf-8") == readme_text()
 
 
-def test_scaled_integers_of_the_note():
-  # The note's §2/§9 table, hand-checked there: these pin the rounding rule.
+def test_scaled_integers_of_docs_jaus():
+  # The table of docs/jaus.md §2 and §9, hand-checked there: these pin the rounding rule.
   assert q(1.5, 0, 10000, 32) == 0x0009D495 and q(1.0, 0, 10000, 32) == 429497
   assert q(1.5, 0, 10000, 16) == 10 and q(1.0, 0, 10000, 16) == 7
   assert q(12.5, -1e5, 1e5, 32) == 0x80041893 and q(-3.25, -1e5, 1e5, 32) == 0x7FFEEF5E
@@ -450,7 +450,7 @@ def test_spec_worked_examples(name):
     assert msg.pose.x == pytest.approx(12.5, abs=5e-5) and msg.pose.y == pytest.approx(-3.25, abs=5e-5)
     assert msg.pose.rotation == pytest.approx(PI / 4, abs=1e-4)
     values = msg.nav2_cost() if msg.variant == "list" else None
-    if values is not None:   # re-encoding the note's documented reals gives its bytes
+    if values is not None:   # re-encoding the documented reals gives the bytes
       again = J.CostMap2DReport.create(values, map_width=1.5, map_height=1.0,
                                        pose=J.LocalPose(12.5, -3.25, PI / 4), profile=msg.profile)
       assert J.encode_report(again) == data
@@ -464,7 +464,7 @@ def test_occupancy_cost_mappings_against_loops():
   nav2 = [255 if d < 0 else math.floor(Fraction(254 * d, 100) + Fraction(1, 2)) for d in occ]
   assert np.array_equal(J.occupancy_to_cost(occ), nav2)
   assert np.array_equal(J.occupancy_to_cost(occ, mapping="fkie"), [255 if d < 0 else 2 * d for d in occ])
-  # Nav2's published key values (spec §1.4).
+  # Nav2's published key values (docs/nav2_semantics.md §1.4).
   assert [int(J.occupancy_to_cost(np.array([d]))[0]) for d in (1, 25, 50, 75, 99, 100)] == [
       3, 64, 127, 191, 251, 254]
   # Back: exact inverse on the image, nearest occupancy (half up) for every other cost.
@@ -533,7 +533,8 @@ def test_grid_round_trip(profile, variant):
     grid = _random_grid(rng, h, w, yaw)
     if mapping == "fkie" and variant == "rle":
       continue   # 3-bit levels decode to costs above 200, outside the fkie range
-    report = J.grid_to_report(grid, profile=profile, variant=variant, mapping=mapping, axes=axes)
+    report = J.grid_to_report(grid, profile=profile, variant=variant, mapping=mapping, axes=axes,
+                              lossy=variant == "rle", check_resolution=profile == "design")
     msg = J.decode_report(J.encode_report(report))
     back = J.report_to_grid(msg, mapping=mapping, axes=axes)
     assert np.array_equal(back.data, _expected_occ(grid.data, variant, mapping))
@@ -932,7 +933,7 @@ def test_cli_wrong_arguments(tmp_path, capsys):
   (tmp_path / "hex.txt").write_text(J.to_hex(good.read_bytes()))
   (tmp_path / "attr.bin").write_bytes(_read_vector("design_report_attractiveness_local"))
   cases = [
-      (["encode", str(yaml_path), "--out", str(good)], "at most 65535 cells"),
+      (["encode", str(yaml_path), "--out", str(good), "--single"], "at most 65535 cells"),
       (["encode", str(yaml_path), "--out", str(good), "--window", "0", "0", "301", "1"],
        "--window"),
       (["encode", str(yaml_path), "--out", str(good), "--window", "0", "0", "x", "1"],
@@ -944,7 +945,7 @@ def test_cli_wrong_arguments(tmp_path, capsys):
       (["encode", str(yaml_path), "--out", str(good), "--profile", "v2"], "invalid choice"),
       (["encode", str(tmp_path / "nope.yaml"), "--out", str(good)], "does not exist"),
       (["encode", str(yaml_path), "--out", str(tmp_path / "no" / "x.bin"), "--window", "0",
-        "0", "1", "1"], "cannot write"),
+        "0", "4", "4"], "cannot write"),
       (["encode", str(yaml_path)], "--out"),
       (["decode", str(tmp_path / "nope.bin"), "--out", str(tmp_path / "x.yaml")], "cannot read"),
       (["decode", str(tmp_path / "short.bin"), "--out", str(tmp_path / "x.yaml")],
