@@ -38,7 +38,7 @@ import jax.numpy as jnp
 import numpy as np
 
 from jaxfilters import constants
-from jaxfilters.shapes import OVERLAY_MAX, OVERLAY_MIN, OVERLAY_SEQ, Shapes, check_shapes
+from jaxfilters.vector_objects import OVERLAY_MAX, OVERLAY_MIN, OVERLAY_SEQ, Shapes, check_shapes
 from jaxfilters.types import FilterInfo
 from jaxfilters.validate import float32_values, short_repr
 
