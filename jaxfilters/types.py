@@ -210,31 +210,62 @@ class FilterMask:
 def check_mask(mask: FilterMask, where: str) -> None:
   """Static checks of a FilterMask pytree that reaches a public function (works under jit).
 
+  A mask built as a pytree (not through `FilterMask.create`) may have any leaves;
+  the shapes and dtypes are static, so they are checked here, at trace time.
+  Values (a NaN resolution, say) are not: see `mask_geometry_ok`.
+
   Raises:
     TypeError: not a FilterMask.
-    ValueError: wrong dtypes or shapes of its leaves (a hand-built pytree).
+    ValueError: wrong dtypes or shapes of its leaves, naming the leaf and the
+      shape expected (data int8 [M, H, W] with M, H, W >= 1; origin float [M, 2];
+      resolution float [M]; info leaves [M]; origin_lo float [M, 2, 2] or None).
   """
   if not isinstance(mask, FilterMask):
     raise TypeError(f"{where}: mask must be a FilterMask (FilterMask.create); got {type(mask).__name__}")
+  if not isinstance(mask.info, FilterInfo):
+    raise TypeError(f"{where}: mask.info must be a FilterInfo; got {type(mask.info).__name__}")
   d = mask.data
   if getattr(d, "ndim", None) != 3 or d.dtype != jnp.int8:
     raise ValueError(f"{where}: mask.data must be int8 [M, H, W]; got {getattr(d, 'dtype', None)}"
                      f"{tuple(getattr(d, 'shape', ()))}")
+  if 0 in d.shape:
+    raise ValueError(f"{where}: mask.data must be int8 [M, H, W] with M, H and W >= 1 (at least one "
+                     f"mask of at least one cell); got shape {tuple(d.shape)}")
   m = d.shape[0]
   expect = {"origin": ((m, 2), "floating"), "resolution": ((m,), "floating"),
             "info.type": ((m,), "integer"), "info.base": ((m,), "floating"),
             "info.multiplier": ((m,), "floating")}
   leaves = {"origin": mask.origin, "resolution": mask.resolution, "info.type": mask.info.type,
             "info.base": mask.info.base, "info.multiplier": mask.info.multiplier}
+  if mask.origin_lo is not None:
+    expect["origin_lo"] = ((m, 2, 2), "floating")
+    leaves["origin_lo"] = mask.origin_lo
   for name, (shape, kind) in expect.items():
     v = leaves[name]
     dt = getattr(v, "dtype", None)
     ok_kind = dt is not None and jnp.issubdtype(dt, jnp.floating if kind == "floating" else jnp.integer)
     if tuple(getattr(v, "shape", ())) != shape or not ok_kind:
-      raise ValueError(f"{where}: mask.{name} must be {kind} {shape}; got {dt}{tuple(getattr(v, 'shape', ()))}")
-  if mask.origin_lo is not None and tuple(mask.origin_lo.shape) != (m, 2, 2):
-    raise ValueError(f"{where}: mask.origin_lo must be float32 ({m}, 2, 2) or None; got "
-                     f"{tuple(mask.origin_lo.shape)}")
+      raise ValueError(f"{where}: mask.{name} must be {kind} {shape} (M = {m} masks, from mask.data "
+                       f"{tuple(d.shape)}); got {dt}{tuple(getattr(v, 'shape', ()))}")
+
+
+def mask_geometry_ok(mask: FilterMask) -> jax.Array:
+  """Whether each mask's geometry can be used, as a traced value: bool [M].
+
+  `FilterMask.create` refuses bad geometry on the host; a mask whose leaves are
+  replaced under `jit` (or built as a pytree) can still carry anything. A mask is
+  usable when its resolution is finite and at least the smallest normal float32
+  (1.18e-38; so 0, negative, NaN, inf and subnormal resolutions are not) and its
+  origin parts (`origin`, and `origin_lo` when present) are finite. Every filter
+  and point query treats a robot or point on an unusable mask as it treats a bad
+  mask index: `valid` False and `error` True (filters), the fill value (queries).
+  """
+  r = mask.resolution
+  ok = jnp.isfinite(r) & (r >= validate.F32_TINY)
+  ok = ok & jnp.all(jnp.isfinite(mask.origin), axis=-1)
+  if mask.origin_lo is not None:
+    ok = ok & jnp.all(jnp.isfinite(mask.origin_lo), axis=(-2, -1))
+  return ok
 
 
 def resolve_mask_index(mask: FilterMask, mask_index: jax.Array | None,
