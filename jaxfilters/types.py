@@ -190,13 +190,29 @@ class FilterMask:
   def with_data(self, data) -> "FilterMask":
     """Returns this mask with new cell contents of the same shape (no recompile).
 
+    Works eagerly and inside a caller's `jit`. Eager (a concrete array) every
+    value is checked. Traced (inside `jit`), the values cannot be read, so only
+    what is static is checked: the shape, and the dtype, which must be int8 (an
+    int32 array would wrap silently when cast; cast it yourself, e.g. with
+    `jnp.clip(x, -128, 127).astype(jnp.int8)`, where you know its range).
+
     Args:
       data: integer [M, H, W] (or [H, W] for M = 1) values that fit int8.
 
     Raises:
       ValueError: data of another shape, a non-integer dtype (floats such as
-        99.9 or NaN are refused, never truncated), or values outside int8.
+        99.9 or NaN are refused, never truncated), values outside int8 (eager),
+        or a traced array that is not int8.
     """
+    if isinstance(data, jax.core.Tracer):
+      arr = data[None] if data.ndim == 2 else data
+      if tuple(arr.shape) != tuple(self.data.shape):
+        raise ValueError(f"new mask data must have shape {tuple(self.data.shape)} (or [H, W] "
+                         f"for M = 1); got {tuple(data.shape)}")
+      if arr.dtype != jnp.int8:
+        raise ValueError(f"FilterMask.with_data: traced new mask data must be int8 (its values cannot be "
+                         f"checked under jit, and a cast would wrap them); got {arr.dtype}")
+      return dataclasses.replace(self, data=arr)
     arr = np.asarray(data)
     if arr.ndim == 2:
       arr = arr[None]
@@ -345,6 +361,15 @@ class Costmap:
   def create(cls, cost, origin, resolution) -> "Costmap":
     """Validates and builds a batch of costmaps, keeping float64 geometry exact.
 
+    Works eagerly and inside a caller's `jit`. A concrete argument is checked
+    in full (values included) and a float64 origin or resolution is carried
+    exactly (`validate.split_float64`). A traced argument (inside `jit`) is
+    checked for what is static only, its shape and dtype: traced `cost` must be
+    uint8, a traced origin or resolution must be floating point and is used as
+    its float32 value (float64 does not exist inside `jit` by default). Traced
+    geometry values are not checked here: `costmap_geometry_ok` says, as a
+    traced value, whether they are usable.
+
     Args:
       cost: uint8 [B, H, W] (or [H, W] for B = 1).
       origin: [B, 2] or [2] (broadcast to every robot), metres; a float64
@@ -352,43 +377,87 @@ class Costmap:
       resolution: [B] or scalar (broadcast), metres per cell; float64 kept exactly.
 
     Raises:
-      ValueError: wrong rank or dtype, batch mismatch, an empty grid, a
-        resolution not > 0 or not a normal float32, a non-finite origin.
+      ValueError: wrong rank or dtype, batch mismatch, an empty grid, and (for
+        concrete values) a resolution not > 0 or not a normal float32, a
+        non-finite origin.
     """
-    c = np.asarray(cost)
-    if c.ndim == 2:
-      c = c[None]
-    if c.ndim != 3 or 0 in c.shape:
-      raise ValueError(f"cost must be a non-empty uint8 [B, H, W]; got shape {c.shape}")
-    if c.dtype != np.uint8:
-      raise ValueError(f"cost must have dtype uint8 (Nav2 costs 0..255); got {c.dtype}")
+    traced = lambda x: isinstance(x, jax.core.Tracer)
+    if traced(cost):
+      c = cost[None] if cost.ndim == 2 else cost
+      if c.ndim != 3 or 0 in c.shape:
+        raise ValueError(f"cost must be a non-empty uint8 [B, H, W]; got shape {tuple(c.shape)}")
+      if c.dtype != jnp.uint8:
+        raise ValueError(f"cost must have dtype uint8 (Nav2 costs 0..255); got {c.dtype}")
+    else:
+      c = np.asarray(cost)
+      if c.ndim == 2:
+        c = c[None]
+      if c.ndim != 3 or 0 in c.shape:
+        raise ValueError(f"cost must be a non-empty uint8 [B, H, W]; got shape {c.shape}")
+      if c.dtype != np.uint8:
+        raise ValueError(f"cost must have dtype uint8 (Nav2 costs 0..255); got {c.dtype}")
     b = c.shape[0]
-    o = np.asarray(validate.float32_values(origin, "origin", owner="Costmap.create").shape)
-    o64 = np.asarray(origin, np.float64)
-    if o64.shape == (2,):
-      o64 = np.broadcast_to(o64, (b, 2))
-    if o64.shape != (b, 2):
-      raise ValueError(f"Costmap.create: origin must be [B, 2] = ({b}, 2) or [2]; got {tuple(o)}")
-    validate.resolution_value(resolution, owner="Costmap.create")
-    r64 = np.asarray(resolution, np.float64)
-    if r64.ndim == 0:
-      r64 = np.broadcast_to(r64, (b,))
-    if r64.shape != (b,):
-      raise ValueError(f"Costmap.create: resolution must be [B] = ({b},) or a scalar; got {r64.shape}")
-    try:
-      op = validate.split_float64(o64)
-      rp = validate.split_float64(r64)
-    except ValueError as e:
-      raise ValueError(f"Costmap.create: {e}") from None
     arr = lambda x: jnp.asarray(np.ascontiguousarray(x))
     lo = lambda x: None if not np.any(x) else arr(x)    # exactly float32: fewer exact terms
-    return cls(jnp.asarray(c), arr(op[..., 0]), arr(rp[..., 0]), lo(op[..., 1:]), lo(rp[..., 1:]))
+    if traced(origin):
+      o_hi, o_lo = _traced_float(origin, "origin", (2,), (b, 2)), None
+    else:
+      o = np.asarray(validate.float32_values(origin, "origin", owner="Costmap.create").shape)
+      o64 = np.asarray(origin, np.float64)
+      if o64.shape == (2,):
+        o64 = np.broadcast_to(o64, (b, 2))
+      if o64.shape != (b, 2):
+        raise ValueError(f"Costmap.create: origin must be [B, 2] = ({b}, 2) or [2]; got {tuple(o)}")
+      try:
+        op = validate.split_float64(o64)
+      except ValueError as e:
+        raise ValueError(f"Costmap.create: {e}") from None
+      o_hi, o_lo = arr(op[..., 0]), lo(op[..., 1:])
+    if traced(resolution):
+      r_hi, r_lo = _traced_float(resolution, "resolution", (), (b,)), None
+    else:
+      validate.resolution_value(resolution, owner="Costmap.create")
+      r64 = np.asarray(resolution, np.float64)
+      if r64.ndim == 0:
+        r64 = np.broadcast_to(r64, (b,))
+      if r64.shape != (b,):
+        raise ValueError(f"Costmap.create: resolution must be [B] = ({b},) or a scalar; got {r64.shape}")
+      try:
+        rp = validate.split_float64(r64)
+      except ValueError as e:
+        raise ValueError(f"Costmap.create: {e}") from None
+      r_hi, r_lo = arr(rp[..., 0]), lo(rp[..., 1:])
+    return cls(jnp.asarray(c), o_hi, r_hi, o_lo, r_lo)
 
   @classmethod
   def from_grid(cls, grid: OccupancyGrid, cost, num_robots: int) -> "Costmap":
     """A global costmap with `grid`'s geometry, repeated for `num_robots` robots."""
     c = np.broadcast_to(np.asarray(cost, np.uint8), (num_robots, *np.shape(cost)[-2:]))
     return cls.create(np.ascontiguousarray(c), grid.origin[:2], grid.resolution)
+
+
+def _traced_float(x, name: str, one: tuple[int, ...], full: tuple[int, ...]) -> jax.Array:
+  """A traced float argument of `Costmap.create` as float32 `full`, broadcast from `one` (static checks only)."""
+  if not jnp.issubdtype(x.dtype, jnp.floating):
+    raise ValueError(f"Costmap.create: {name} must be floating point; got {x.dtype}")
+  if tuple(x.shape) not in (one, full):
+    raise ValueError(f"Costmap.create: {name} must be {list(full)} or {list(one)}; got {tuple(x.shape)}")
+  return jnp.broadcast_to(x.astype(jnp.float32), full)
+
+
+def costmap_geometry_ok(costmap: Costmap) -> jax.Array:
+  """Whether each costmap's geometry can be used, as a traced value: bool [B].
+
+  As `mask_geometry_ok`: a resolution that is finite and at least the smallest
+  normal float32, finite origin parts (and finite `*_lo` parts when present).
+  """
+  r = costmap.resolution
+  ok = jnp.isfinite(r) & (r >= validate.F32_TINY) & jnp.all(jnp.isfinite(costmap.origin), axis=-1)
+  if costmap.origin_lo is not None:
+    ok = ok & jnp.all(jnp.isfinite(costmap.origin_lo), axis=(-2, -1))
+  if costmap.resolution_lo is not None:
+    ok = ok & jnp.all(jnp.isfinite(costmap.resolution_lo), axis=-1)
+  return ok
 
 
 def check_costmap(costmap: Costmap, where: str) -> None:
@@ -405,6 +474,9 @@ def check_costmap(costmap: Costmap, where: str) -> None:
   if getattr(c, "ndim", None) != 3 or c.dtype != jnp.uint8:
     raise ValueError(f"{where}: costmap.cost must be uint8 [B, H, W] (Nav2 costs 0..255); got "
                      f"{getattr(c, 'dtype', None)}{tuple(getattr(c, 'shape', ()))}")
+  if 0 in c.shape:
+    raise ValueError(f"{where}: costmap.cost must be uint8 [B, H, W] with B, H and W >= 1; got shape "
+                     f"{tuple(c.shape)}")
   b = c.shape[0]
   for name, v, shape in (("origin", costmap.origin, (b, 2)), ("resolution", costmap.resolution, (b,)),
                          ("origin_lo", costmap.origin_lo, (b, 2, 2)),
