@@ -262,6 +262,8 @@ def guard_index(new_state, out, state, ok):
   out = dataclasses.replace(out, valid=out.valid & ok, error=~ok)
   if hasattr(out, "changed"):
     out = dataclasses.replace(out, changed=out.changed & ok)
+  if hasattr(out, "speed_limit"):          # the limit in force is the kept one
+    out = dataclasses.replace(out, speed_limit=jnp.where(ok, out.speed_limit, state.speed_limit_prev))
   return kept, out
 
 
