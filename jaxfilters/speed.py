@@ -1,4 +1,4 @@
-"""SpeedFilter (spec §5): the speed limit under each robot, as carried state.
+"""SpeedFilter (docs/nav2_semantics.md §5): the speed limit under each robot, as carried state.
 
 Nav2 publishes a `SpeedLimit` only when the limit changes, keeps the previous
 limit on unknown or off-mask cells, and uses 0.0 for "no limit". Here that is
@@ -85,7 +85,7 @@ class SpeedResult:
 
 @dataclasses.dataclass(frozen=True)
 class LookaheadConfig:
-  """SpeedFilter path lookahead parameters (spec §5.6), with Nav2's corrections.
+  """SpeedFilter path lookahead parameters (docs/nav2_semantics.md §5.6), with Nav2's corrections.
 
   Attributes:
     max_decel: m/s^2, must be negative to scale the distance with speed; a
@@ -148,7 +148,7 @@ def speed_limit_at_one(data, mask_origin, mask_res, info: FilterInfo, xy):
 
 
 def _publish_step(prev, limit, valid, enabled):
-  """Publish-on-change with keep-previous on invalid cycles (spec §5.4)."""
+  """Publish-on-change with keep-previous on invalid cycles (docs/nav2_semantics.md §5.4)."""
   ok = valid & enabled
   changed = ok & (limit != prev)
   new_prev = jnp.where(ok, limit, prev)
@@ -186,7 +186,7 @@ def _segment_distance(p, a, b):
 
 def speed_lookahead_one(state, data, mask_origin, mask_res, info, pose, path, path_len, new_path,
                         velocity, enabled, transform=None, *, config: LookaheadConfig):
-  """SpeedFilter::process with path lookahead for one robot (spec §5.6).
+  """SpeedFilter::process with path lookahead for one robot (docs/nav2_semantics.md §5.6).
 
   Args:
     state: SpeedState of one robot.
@@ -269,7 +269,7 @@ def guard_index(new_state, out, state, ok):
 
 def speed_filter(mask: FilterMask, poses, state: SpeedState, *, mask_index=None, enabled=None,
                  transform=None) -> tuple[SpeedState, SpeedResult]:
-  """Nav2 SpeedFilter over a fleet, at each robot's pose (spec §5.3-§5.4).
+  """Nav2 SpeedFilter over a fleet, at each robot's pose (docs/nav2_semantics.md §5.3-§5.4).
 
   Jitted at the edge: an eager call compiles once per shape and runs with
   memory independent of B beyond the outputs; inside a caller's `jit` it inlines.
@@ -307,7 +307,7 @@ def speed_filter_lookahead(mask: FilterMask, poses, state: SpeedState, paths, pa
                            velocities, *, new_path=None, mask_index=None, enabled=None,
                            transform=None,
                            config: LookaheadConfig = LookaheadConfig()) -> tuple[SpeedState, SpeedResult]:
-  """Nav2 SpeedFilter with `enable_path_lookahead` over a fleet (spec §5.6).
+  """Nav2 SpeedFilter with `enable_path_lookahead` over a fleet (docs/nav2_semantics.md §5.6).
 
   The strictest (smallest non-zero) limit along each robot's path within the
   lookahead distance is published; robots with path_lengths 0 use the plain

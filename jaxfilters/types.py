@@ -1,11 +1,13 @@
 """Device data model: pytrees for filter info, masks and batched costmaps.
 
-Every field is a traced leaf (STYLE.md habit 2), so a fleet whose robots use
-different resolutions, origins, bases or multipliers compiles once, and
-replacing a mask's contents with one of the same shape never recompiles.
-Factories (`create`) validate on the host and raise `ValueError` naming what
-was expected and what was given (habit 3); the dataclass constructors stay
-dumb records because JAX rebuilds them under `jit`/`vmap`.
+Every field is a traced leaf, so a fleet whose robots use different
+resolutions, origins, bases or multipliers compiles once, and replacing a
+mask's contents with one of the same shape never recompiles. Factories
+(`create`) validate on the host and raise `ValueError` naming what was expected
+and what was given; the dataclass constructors stay dumb records because JAX
+rebuilds them under `jit`/`vmap`. Under `jit` the static parts (shapes, dtypes)
+are checked at trace time (`check_mask`, `check_costmap`) and traced geometry
+values are judged by `mask_geometry_ok` / `costmap_geometry_ok`.
 """
 
 from __future__ import annotations

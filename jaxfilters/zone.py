@@ -1,4 +1,4 @@
-"""ZoneParameterFilter (spec §7): mask value -> zone id -> a row of per-zone parameters.
+"""ZoneParameterFilter (docs/nav2_semantics.md §7): mask value -> zone id -> a row of per-zone parameters.
 
 Nav2 sets ROS parameters on other nodes; here each zone is a row of a table of
 P float parameters, and the filter yields, per robot, the parameter values in
@@ -10,8 +10,8 @@ force after Nav2's rules:
 * leaving the mask applies state 0 with no state event; an unknown cell changes
   nothing; the first in-mask cycle always applies a state (an event 0 too);
 * a zone id with no configured row is an error in Nav2 (it throws): here the
-  robot's state is left untouched and `error` is set (value problems are masked,
-  STYLE.md habit 5);
+  robot's state is left untouched and `error` is set (under `jit` a value
+  problem is masked and flagged, never raised);
 * a mask whose info type is not 4 (zone parameter) is refused by Nav2: the
   filter is inert for that robot (state kept, no event, no error);
 * a traced `mask_index` outside [0, M), or a mask whose traced geometry is

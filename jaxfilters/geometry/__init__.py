@@ -4,7 +4,7 @@ Float32 policy
 --------------
 Poses, origins and resolutions live on the device as float32. Nav2 computes
 `floor((w - o) / res)` in float64; float32 division can round a quotient such as
-2.9999999 up to 3.0 and move a point into the next cell (spec §2.2: 0.3 / 0.1).
+2.9999999 up to 3.0 and move a point into the next cell (docs/nav2_semantics.md §2.2: 0.3 / 0.1).
 jaxfilters never trusts a rounded quotient for a cell index. Each index is the
 *exact* floor of the real-number quotient of the float32 inputs:
 
@@ -26,7 +26,7 @@ rounded: `validate.split_float64` splits each into three float32 parts whose exa
 is the double (24 + 24 + 5 bits cover its 53), and the exact arithmetic takes
 the parts as extra terms. So a floor decided from Nav2's doubles (the costmap
 origin and resolution, the mask origin; the mask resolution is float32 in
-nav_msgs) is the floor Nav2 computes (spec §4.3's coarse-mask example: 21 with
+nav_msgs) is the floor Nav2 computes (docs/nav2_semantics.md §4.3's coarse-mask example: 21 with
 the decimal 0.05). Poses stay float32 inputs.
 
 Layout: `exact` (error-free sums and products, expansions, exact signs and

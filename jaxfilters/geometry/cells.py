@@ -45,7 +45,7 @@ def resolution_terms(resolution: jax.Array, resolution_lo: jax.Array | None) -> 
 def world_to_cell(wx: jax.Array, wy: jax.Array, origin, resolution: jax.Array,
                   width: int, height: int, origin_lo: jax.Array | None = None
                   ) -> tuple[jax.Array, jax.Array, jax.Array]:
-  """Nav2 `worldToMap` (spec §2.2): bounded, half-open [o, o + size*res).
+  """Nav2 `worldToMap` (docs/nav2_semantics.md §2.2): bounded, half-open [o, o + size*res).
 
   Args:
     wx, wy: float32 world coordinates (any matching shape).

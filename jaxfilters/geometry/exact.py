@@ -119,8 +119,8 @@ def floor_div_exact(num_terms: Sequence[jax.Array], res, *, sign_fn=expansion_si
   for t in num_terms[1:]:
     approx = approx + t
   q0 = jnp.floor(approx / res_terms[0])
-  # A quotient beyond float32 (|x| > ~1e37 m at 5 cm) used to restart from 0 and come
-  # out as cell 1; start it far off every grid instead (NaN still starts from 0).
+  # A quotient beyond float32 (|x| > ~1e37 m at 5 cm) starts far off every grid (2**30),
+  # so it never lands on a cell; NaN starts from 0 (callers mask non-finite points).
   q0 = jnp.where(jnp.isfinite(q0), q0, jnp.where(jnp.isnan(q0), 0.0, jnp.sign(q0) * 2.0 ** 30))
   cands = jnp.stack([q0, q0 + 1.0])
   terms = [jnp.stack([t, t]) for t in num_terms]
