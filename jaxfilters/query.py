@@ -168,8 +168,8 @@ def speed_limit_at(mask: FilterMask, points, *, mask_index=None):
     Nav2's value: 0.0 means "no limit" (mask value 0, or a computed limit out
     of range), otherwise percent of max speed or m/s per `percentage`. valid is
     False (limit 0.0) off the mask, for a non-finite point, on an unknown (-1)
-    cell, for a mask whose type is neither 1 nor 2, and for an out-of-range
-    mask_index under jit.
+    cell, for a mask whose type is neither 1 nor 2, for an out-of-range
+    mask_index under jit and on a mask whose traced geometry is unusable.
 
   Raises:
     ValueError / TypeError: points not float [..., 2], a host value that does
@@ -201,7 +201,8 @@ def keepout_cost_at(mask: FilterMask, points, *, mask_index=None) -> jax.Array:
   Returns:
     uint8 [...]: `occ_to_cost` of the cell (0..254; 254 for mask value 100,
     the lethal keepout), 255 off the mask, for a non-finite point, on an
-    unknown cell and for an out-of-range mask_index under jit.
+    unknown cell, for an out-of-range mask_index under jit and on a mask
+    whose traced geometry is unusable.
 
   Raises:
     ValueError / TypeError: as `speed_limit_at`.
@@ -230,8 +231,8 @@ def zone_at(mask: FilterMask, points, *, mask_index=None) -> jax.Array:
 
   Returns:
     int32 [...]: the zone id (0 = nominal), -1 off the mask, for a
-    non-finite point, on a negative (unknown) cell and for an out-of-range
-    mask_index under jit.
+    non-finite point, on a negative (unknown) cell, for an out-of-range
+    mask_index under jit and on a mask whose traced geometry is unusable.
 
   Raises:
     ValueError / TypeError: as `speed_limit_at`.
@@ -266,8 +267,8 @@ def binary_at(mask: FilterMask, points, *, mask_index=None, default_state: bool 
     (state bool [...], valid bool [...]): state is `not default_state` where
     the cell's value is above the threshold, else `default_state`. valid is
     False (state = default_state) off the mask, for a non-finite point, on an
-    unknown cell, for a mask whose type is not 3 and for an out-of-range
-    mask_index under jit.
+    unknown cell, for a mask whose type is not 3, for an out-of-range
+    mask_index under jit and on a mask whose traced geometry is unusable.
 
   Raises:
     ValueError / TypeError: as `speed_limit_at`, or a non-bool default_state,
