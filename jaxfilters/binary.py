@@ -1,4 +1,4 @@
-"""BinaryFilter (spec §6): flip a per-robot boolean when the robot enters a zone.
+"""BinaryFilter (docs/nav2_semantics.md §6): flip a per-robot boolean when the robot enters a zone.
 
 State in, new state plus `published` out. Nav2's publish rules:
 * outside the mask: state = default_state, published on **every** cycle;
@@ -18,8 +18,8 @@ import jax.numpy as jnp
 from jaxfilters import constants
 from jaxfilters import geometry
 from jaxfilters import validate
-from jaxfilters.speed import exact_sign_affine, mask_leaves, transform_point
-from jaxfilters.types import FilterMask, pytree_dataclass, robot_inputs
+from jaxfilters.mask_lookup import mask_cell, mask_leaves, transform_point
+from jaxfilters.types import FilterMask, mask_geometry_ok, pytree_dataclass, robot_inputs
 
 _F32 = jnp.float32
 
@@ -43,7 +43,8 @@ class BinaryResult:
     binary_state: bool [B], the state after this cycle.
     published: bool [B], Nav2 would publish std_msgs/Bool(binary_state).
     in_mask: bool [B], the robot was on a known mask cell.
-    error: bool [B], the robot's traced mask_index was outside [0, M): its
+    error: bool [B], the robot's traced mask_index was outside [0, M) or its
+      mask's traced geometry is unusable (`types.mask_geometry_ok`): its
       state was kept and nothing published.
   """
   binary_state: jax.Array
@@ -52,18 +53,31 @@ class BinaryResult:
   error: jax.Array | None = None
 
 
+def binary_cell(d, info, default_state, flip_threshold):
+  """Nav2's BinaryFilter rule for one mask value (docs/nav2_semantics.md §6).
+
+  Args:
+    d: int32 [] raw mask value. info: FilterInfo with scalar leaves.
+    default_state: bool []. flip_threshold: float32 [].
+
+  Returns:
+    (state bool [], `not default_state` where `base + d * multiplier >
+    flip_threshold` (strict, decided exactly), else `default_state`; known
+    bool [], False on an unknown cell (-1), where Nav2 changes nothing).
+  """
+  above = geometry.exact_sign_affine(d, info.multiplier, info.base, flip_threshold) > 0
+  return jnp.where(above, ~default_state, default_state), d != constants.OCC_GRID_UNKNOWN
+
+
 def binary_filter_one(state, data, mask_origin, mask_res, info, pose, default_state,
                       flip_threshold, enabled, transform):
   """BinaryFilter::process for one robot (scalar leaves; see module docstring)."""
-  hm, wm = data.shape
   xy = pose[:2] if transform is None else transform_point(transform, pose[:2])
-  mx, my, inside = geometry.world_to_cell(xy[0], xy[1], mask_origin, mask_res, wm, hm)
-  d = data[my, mx].astype(jnp.int32)
+  d, inside = mask_cell(data, mask_origin, mask_res, xy)
   # A mask of another type is never subscribed in Nav2: the filter does nothing.
   active = enabled & (info.type == constants.BINARY_FILTER)
-  known = inside & (d != constants.OCC_GRID_UNKNOWN)
-  above = exact_sign_affine(d, info.multiplier, info.base, flip_threshold) > 0
-  target = jnp.where(above, ~default_state, default_state)
+  target, known = binary_cell(d, info, default_state, flip_threshold)
+  known = inside & known
   s = state.binary_state
   new = jnp.where(inside, jnp.where(known, target, s), default_state)
   published = jnp.where(inside, known & (new != s), True)
@@ -113,6 +127,8 @@ def binary_filter(mask: FilterMask, poses, state: BinaryState, *, default_state=
 @jax.jit
 def _binary_jit(mask, poses, state, default_state, flip_threshold, idx, idx_ok, enabled, transform):
   with jax.named_scope("binary_filter"):
+    idx_ok = idx_ok & mask_geometry_ok(mask)[idx]
+
     def one(st, i, ok, pose, ds, thr, en, tf):
       new, out = binary_filter_one(st, *mask_leaves(mask, i), pose, ds, thr, en, tf)
       kept = jax.tree.map(lambda a, b: jnp.where(ok, a, b), new, st)

@@ -1,4 +1,4 @@
-"""Nav2 cost values, occupancy values and filter type codes (spec §1)."""
+"""Nav2 cost values, occupancy values and filter type codes (docs/nav2_semantics.md §1)."""
 
 # Costmap cell values (nav2_costmap_2d/cost_values.hpp), uint8.
 FREE_SPACE = 0

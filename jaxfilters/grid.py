@@ -60,7 +60,7 @@ class OccupancyGrid:
       (the bottom row of the image), as in nav_msgs/OccupancyGrid.
     resolution: metres per cell (nav_msgs stores it as float32).
     origin: (x, y, yaw) of the lower-left corner of cell (0, 0): metres,
-      metres, radians. Nav2 ignores the yaw everywhere (spec §2.1); it is kept
+      metres, radians. Nav2 ignores the yaw everywhere (docs/nav2_semantics.md §2.1); it is kept
       for saving.
     frame_id: the frame the grid lives in ("map" as map_server loads it).
   """

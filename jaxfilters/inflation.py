@@ -1,8 +1,8 @@
-"""InflationLayer: Nav2's current inflation (exact EDT + 0.01-cell cost LUT, spec §9.3).
+"""InflationLayer: Nav2's current inflation (exact EDT + 0.01-cell cost LUT, docs/nav2_semantics.md §9.3).
 
-Only the current `nav2_costmap_2d::InflationLayer` (PR #5933, default since
-2026-03) is implemented. The `LegacyInflationLayer` (4-connected wavefront with
-inherited sources, §9.4) is not: the two differ by ±1 at some distances.
+Only the current `nav2_costmap_2d::InflationLayer` (Nav2 PR #5933, the default)
+is implemented. The `LegacyInflationLayer` (4-connected wavefront with
+inherited sources, docs/nav2_semantics.md §9.4) is not: the two differ by ±1 at some distances.
 
 What Nav2 computes, for a window that is the whole map (the ROI padded by R is
 then the whole map too, so a cell near the border sees only in-map obstacles):
@@ -65,7 +65,7 @@ COST_LUT_PRECISION = 100  # LUT samples per cell (Nav2's COST_LUT_PRECISION).
 
 
 # ----------------------------------------------------------------------------
-# Radii (spec §9.1, nav2_costmap_2d/src/footprint.cpp + costmap_math.cpp).
+# Radii (docs/nav2_semantics.md §9.1, nav2_costmap_2d/src/footprint.cpp + costmap_math.cpp).
 
 
 def _sign0(x: float) -> float:
@@ -248,7 +248,7 @@ class InflationConfig:
 
 
 def compute_cost(distance: float, *, config: InflationConfig) -> int:
-  """Nav2's `computeCost(distance)` in float64 (spec §9.2).
+  """Nav2's `computeCost(distance)` in float64 (docs/nav2_semantics.md §9.2).
 
   Args:
     distance: distance to the nearest obstacle, in cells.

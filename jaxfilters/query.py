@@ -9,15 +9,17 @@ batch of one:
     limit, percentage, valid = speed_limit_at(mask, [1.2, 3.4])     # shapes []
     cost = keepout_cost_at(mask, xy)                                 # xy [T, B, 2] -> uint8 [T, B]
 
-Every answer is one mask cell, read with Nav2's `worldToMap` (exact floor,
-jaxfilters.geometry) and decoded by the filters' own per-robot kernels
-(`speed.speed_limit_at_one`, `keepout.occ_to_cost`); no frame transform is
-applied (points are in the mask frame).
+Every answer is one mask cell, read through the filters' own cell rule
+(`mask_lookup.mask_cell`: Nav2's `worldToMap` as an exact floor on the host
+float64 origin) and decoded by the filters' own rules (`speed.speed_limit_value`,
+`keepout.occ_to_cost`, `binary.binary_cell`, `zone.zone_cell`), so a query and a
+filter at the same pose read the same cell and give the same answer. No frame
+transform is applied (points are in the mask frame).
 
-Fill values (STYLE.md habit 5: value problems are masked, never raised under
-`jit`):
+Fill values (value problems are masked, never raised under `jit`, so one bad
+point cannot stop a batch):
 
-| query | off the mask, non-finite point, unknown cell (-1), bad mask_index |
+| query | off the mask, non-finite point, unknown cell (-1), bad mask_index, unusable mask geometry |
 | --- | --- |
 | `speed_limit_at` | limit 0.0, valid False |
 | `keepout_cost_at` | 255 (NO_INFORMATION) |
@@ -27,7 +29,9 @@ Fill values (STYLE.md habit 5: value problems are masked, never raised under
 `mask_index` picks one mask of a stack per point (int of the points' leading
 shape). With concrete values (eager calls) an index outside [0, M) raises
 `ValueError` naming it; under an outer `jit` the values are unknown, so such a
-point gets the fill value above (never another mask's answer).
+point gets the fill value above (never another mask's answer). A mask whose
+traced geometry is unusable (`types.mask_geometry_ok`: a resolution that is not
+a normal float32 > 0, a non-finite origin) likewise gives the fill value.
 """
 
 from __future__ import annotations
@@ -36,10 +40,13 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from jaxfilters import constants, geometry
+from jaxfilters import constants
+from jaxfilters.binary import binary_cell
 from jaxfilters.keepout import occ_to_cost
-from jaxfilters.speed import exact_sign_affine, speed_limit_at_one
-from jaxfilters.types import FilterMask
+from jaxfilters.mask_lookup import mask_cell, mask_leaves
+from jaxfilters.speed import speed_limit_at_one
+from jaxfilters.types import FilterMask, check_mask, mask_geometry_ok
+from jaxfilters.zone import zone_cell
 from jaxfilters.validate import F32_TINY, float32_values, short_repr
 
 _F32 = jnp.float32
@@ -89,8 +96,7 @@ def _points(fn: str, points) -> jax.Array:
 
 def _mask_index(fn: str, mask: FilterMask, mask_index, lead: tuple[int, ...]) -> jax.Array:
   """int32 of the leading shape; concrete values are range-checked (see module docstring)."""
-  if not isinstance(mask, FilterMask):
-    raise TypeError(f"{fn}: mask must be a jaxfilters.FilterMask; got {type(mask).__name__}")
+  check_mask(mask, fn)
   m = mask.num_masks
   if mask_index is None:
     if m != 1:
@@ -122,23 +128,26 @@ def _prepare(fn, mask, points, mask_index):
   return pts.reshape(-1, 2), idx.reshape(-1), lead
 
 
-def _cell(mask: FilterMask, i, xy):
-  """(raw int8 value as int32, on-mask bool) of mask i at one point; i outside [0, M) -> off."""
-  m, h, w = mask.data.shape
+def _mask_at(mask: FilterMask, i):
+  """(mask i's leaves as `mask_lookup.mask_leaves`, usable bool []): i outside [0, M) or bad geometry -> False."""
+  m = mask.num_masks
   ok = (i >= 0) & (i < m)
   j = jnp.clip(i, 0, m - 1)
-  mx, my, inside = geometry.world_to_cell(xy[0], xy[1], mask.origin[j], mask.resolution[j], w, h)
-  return mask.data[j, my, mx].astype(jnp.int32), inside & ok, j, ok
+  return mask_leaves(mask, j), ok & mask_geometry_ok(mask)[j]
+
+
+def _cell(mask: FilterMask, i, xy):
+  """(raw value int32, on a usable mask bool, info) of mask i at one point (the filters' cell rule)."""
+  (data, origin, res, info), ok = _mask_at(mask, i)
+  d, inside = mask_cell(data, origin, res, xy)
+  return d, inside & ok, info
 
 
 @jax.jit
 def _speed(mask: FilterMask, pts, idx):
   def one(xy, i):
-    m = mask.num_masks
-    ok = (i >= 0) & (i < m)
-    j = jnp.clip(i, 0, m - 1)
-    info = jax.tree.map(lambda a: a[j], mask.info)
-    limit, valid = speed_limit_at_one(mask.data[j], mask.origin[j], mask.resolution[j], info, xy)
+    (data, origin, res, info), ok = _mask_at(mask, i)
+    limit, valid = speed_limit_at_one(data, origin, res, info, xy)
     valid = valid & ok
     return (jnp.where(valid, limit, 0.0).astype(_F32),
             info.type == constants.SPEED_FILTER_PERCENT, valid)
@@ -146,7 +155,7 @@ def _speed(mask: FilterMask, pts, idx):
 
 
 def speed_limit_at(mask: FilterMask, points, *, mask_index=None):
-  """The SpeedFilter limit at points (Nav2 getSpeedLimitAtPose, spec §5.3).
+  """The SpeedFilter limit at points (Nav2 getSpeedLimitAtPose, docs/nav2_semantics.md §5.3).
 
   Args:
     mask: FilterMask of type 1 (percent) or 2 (m/s), M masks.
@@ -159,8 +168,8 @@ def speed_limit_at(mask: FilterMask, points, *, mask_index=None):
     Nav2's value: 0.0 means "no limit" (mask value 0, or a computed limit out
     of range), otherwise percent of max speed or m/s per `percentage`. valid is
     False (limit 0.0) off the mask, for a non-finite point, on an unknown (-1)
-    cell, for a mask whose type is neither 1 nor 2, and for an out-of-range
-    mask_index under jit.
+    cell, for a mask whose type is neither 1 nor 2, for an out-of-range
+    mask_index under jit and on a mask whose traced geometry is unusable.
 
   Raises:
     ValueError / TypeError: points not float [..., 2], a host value that does
@@ -176,13 +185,13 @@ def speed_limit_at(mask: FilterMask, points, *, mask_index=None):
 @jax.jit
 def _keepout(mask: FilterMask, pts, idx):
   def one(xy, i):
-    d, inside, _, _ = _cell(mask, i, xy)
+    d, inside, _ = _cell(mask, i, xy)
     return jnp.where(inside, occ_to_cost(d), jnp.uint8(constants.NO_INFORMATION))
   return jax.vmap(one)(pts, idx)
 
 
 def keepout_cost_at(mask: FilterMask, points, *, mask_index=None) -> jax.Array:
-  """The cost the KeepoutFilter would write from the mask cell at points (spec §1.4, §4.4).
+  """The cost the KeepoutFilter would write from the mask cell at points (docs/nav2_semantics.md §1.4, §4.4).
 
   Args:
     mask: FilterMask (type 0; like Nav2, base and multiplier are not used).
@@ -192,7 +201,8 @@ def keepout_cost_at(mask: FilterMask, points, *, mask_index=None) -> jax.Array:
   Returns:
     uint8 [...]: `occ_to_cost` of the cell (0..254; 254 for mask value 100,
     the lethal keepout), 255 off the mask, for a non-finite point, on an
-    unknown cell and for an out-of-range mask_index under jit.
+    unknown cell, for an out-of-range mask_index under jit and on a mask
+    whose traced geometry is unusable.
 
   Raises:
     ValueError / TypeError: as `speed_limit_at`.
@@ -205,13 +215,14 @@ def keepout_cost_at(mask: FilterMask, points, *, mask_index=None) -> jax.Array:
 @jax.jit
 def _zone(mask: FilterMask, pts, idx):
   def one(xy, i):
-    d, inside, _, _ = _cell(mask, i, xy)
-    return jnp.where(inside & (d >= 0), d, NO_ZONE).astype(jnp.int32)
+    d, inside, _ = _cell(mask, i, xy)
+    zid, known = zone_cell(d)
+    return jnp.where(inside & known, zid, NO_ZONE).astype(jnp.int32)
   return jax.vmap(one)(pts, idx)
 
 
 def zone_at(mask: FilterMask, points, *, mask_index=None) -> jax.Array:
-  """The ZoneParameterFilter state id at points (spec §7: id = mask value 0..127).
+  """The ZoneParameterFilter state id at points (docs/nav2_semantics.md §7: id = mask value 0..127).
 
   Args:
     mask: FilterMask (type 4; base and multiplier are ignored, as in Nav2).
@@ -220,8 +231,8 @@ def zone_at(mask: FilterMask, points, *, mask_index=None) -> jax.Array:
 
   Returns:
     int32 [...]: the zone id (0 = nominal), -1 off the mask, for a
-    non-finite point, on a negative (unknown) cell and for an out-of-range
-    mask_index under jit.
+    non-finite point, on a negative (unknown) cell, for an out-of-range
+    mask_index under jit and on a mask whose traced geometry is unusable.
 
   Raises:
     ValueError / TypeError: as `speed_limit_at`.
@@ -234,17 +245,16 @@ def zone_at(mask: FilterMask, points, *, mask_index=None) -> jax.Array:
 @jax.jit
 def _binary(mask: FilterMask, pts, idx, default_state, flip_threshold):
   def one(xy, i):
-    d, inside, j, _ = _cell(mask, i, xy)
-    typed = mask.info.type[j] == constants.BINARY_FILTER
-    valid = inside & typed & (d != constants.OCC_GRID_UNKNOWN)
-    above = exact_sign_affine(d, mask.info.multiplier[j], mask.info.base[j], flip_threshold) > 0
-    return jnp.where(valid & above, ~default_state, default_state), valid
+    d, inside, info = _cell(mask, i, xy)
+    target, known = binary_cell(d, info, default_state, flip_threshold)
+    valid = inside & (info.type == constants.BINARY_FILTER) & known
+    return jnp.where(valid, target, default_state), valid
   return jax.vmap(one)(pts, idx)
 
 
 def binary_at(mask: FilterMask, points, *, mask_index=None, default_state: bool = False,
               flip_threshold: float = 50.0):
-  """The BinaryFilter state at points (spec §6): base + d * multiplier > flip_threshold flips it.
+  """The BinaryFilter state at points (docs/nav2_semantics.md §6): base + d * multiplier > flip_threshold flips it.
 
   Args:
     mask: FilterMask of type 3.
@@ -257,8 +267,8 @@ def binary_at(mask: FilterMask, points, *, mask_index=None, default_state: bool 
     (state bool [...], valid bool [...]): state is `not default_state` where
     the cell's value is above the threshold, else `default_state`. valid is
     False (state = default_state) off the mask, for a non-finite point, on an
-    unknown cell, for a mask whose type is not 3 and for an out-of-range
-    mask_index under jit.
+    unknown cell, for a mask whose type is not 3, for an out-of-range
+    mask_index under jit and on a mask whose traced geometry is unusable.
 
   Raises:
     ValueError / TypeError: as `speed_limit_at`, or a non-bool default_state,

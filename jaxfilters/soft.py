@@ -26,7 +26,10 @@ value -1 (unknown) is transparent (the hard SpeedFilter instead keeps its
 previous limit on unknown cells); OVERLAY_MIN has no soft counterpart.
 
 Widths, margins and points are traced; a traced width that is not finite and
-> 0 gives NaN results (a concrete one raises ValueError).
+> 0 gives NaN results (a concrete one raises ValueError). Points may be
+anywhere: far points (2e19 m) get finite, correct results (distances are
+scaled before squaring), a point with an infinite coordinate lies outside every
+zone, and a point with a NaN coordinate gives NaN (no answer, visibly).
 """
 
 from __future__ import annotations
@@ -38,7 +41,7 @@ import jax.numpy as jnp
 import numpy as np
 
 from jaxfilters import constants
-from jaxfilters.shapes import OVERLAY_MAX, OVERLAY_MIN, OVERLAY_SEQ, Shapes, check_shapes
+from jaxfilters.vector_objects import OVERLAY_MAX, OVERLAY_MIN, OVERLAY_SEQ, Shapes, check_shapes
 from jaxfilters.types import FilterInfo
 from jaxfilters.validate import float32_values, short_repr
 
@@ -51,8 +54,28 @@ def _safe_sqrt(x):
   return jnp.where(pos, jnp.sqrt(jnp.where(pos, x, 1.0)), 0.0)
 
 
+_FAR = 2.0 ** 60     # offsets beyond this are scaled down before squaring (float32 squares overflow at 1.8e19)
+_FAR_SCALE = 2.0 ** 100   # their scale: a power of two whose reciprocal is a normal float32 (XLA flushes
+                          # subnormals, so dividing by the offset itself could give 0)
+
+
+def _scale_of(offset_max):
+  """1 for ordinary offsets (results bit for bit unscaled), else 2**100 (no gradient).
+
+  Offsets up to 3.4e38 (2**128) scale to at most 2**28, whose squares fit float32;
+  offsets above 2**60 scale to at least 2**-40, whose squares stay normal.
+  """
+  return jax.lax.stop_gradient(jnp.where(offset_max > _FAR, jnp.float32(_FAR_SCALE), jnp.float32(1.0)))
+
+
 def polygon_signed_distance_one(vertices, num_vertices, point):
   """Signed distance from one point to one polygon (negative inside, even-odd rule).
+
+  Far points are handled without overflow: offsets above 2**60 m are scaled
+  down before any product, so a point at x = 2e19 gets its true distance (about
+  2e19), not an overflowed one. The inside test runs only for points inside the
+  polygon's bounding box (a point outside it is outside the polygon), whose
+  coordinates are as small as the vertices' and cannot overflow.
 
   Args:
     vertices: float32 [V, 2]; only the first `num_vertices` are used.
@@ -60,42 +83,63 @@ def polygon_signed_distance_one(vertices, num_vertices, point):
     point: float32 [2].
 
   Returns:
-    float32 [] metres.
+    float32 [] metres; +inf for a point with an infinite coordinate (and none
+    NaN): it lies outside every bounded shape; NaN for a point with a NaN
+    coordinate (there is no answer: callers pass the NaN on).
   """
   v = vertices.shape[0]
   k = jnp.arange(v)
   used = k < num_vertices
+  has_nan = jnp.any(jnp.isnan(point))
+  infinite = ~has_nan & ~jnp.all(jnp.isfinite(point))
+  point = jnp.where(jnp.isfinite(point), point, 0.0)
   a = vertices
   b = jnp.where(((k + 1) < num_vertices)[:, None], jnp.roll(vertices, -1, axis=0), vertices[:1])
   ab = b - a
   ap = point[None, :] - a
+  scale = _scale_of(jnp.max(jnp.where(used[:, None], jnp.abs(ap), 0.0)))
+  ap_s = ap / scale
   len2 = jnp.sum(ab * ab, axis=-1)
-  t = jnp.clip(jnp.sum(ap * ab, axis=-1) / jnp.where(len2 > 0, len2, 1.0), 0.0, 1.0)
-  t = jnp.where(len2 > 0, t, 0.0)
-  d = ap - t[:, None] * ab
+  dot = jnp.sum(ap_s * ab, axis=-1)                   # (ap . ab) / scale
+  r = len2 / scale
+  t = jnp.where(dot > 0, jnp.where(dot >= r, 1.0, dot / jnp.where(r > 0, r, 1.0)), 0.0)
+  d = ap_s - t[:, None] * (ab / scale)
   d2 = jnp.where(used, jnp.sum(d * d, axis=-1), jnp.inf)
-  dmin2 = jnp.min(d2)
-  dist = _safe_sqrt(jnp.where(jnp.isfinite(dmin2), dmin2, 1.0))
-  # Nav2's crossing test (isPointInsidePolygon), in float32.
+  dist = _safe_sqrt(jnp.min(d2)) * scale
+  # Nav2's crossing test (isPointInsidePolygon), in float32, inside the bounding box only.
   px, py = point[0], point[1]
+  lo = jnp.min(jnp.where(used[:, None], a, jnp.inf), axis=0)
+  hi = jnp.max(jnp.where(used[:, None], a, -jnp.inf), axis=0)
+  in_box = (px >= lo[0]) & (px <= hi[0]) & (py >= lo[1]) & (py <= hi[1])
   xi, yi, xj, yj = a[:, 0], a[:, 1], b[:, 0], b[:, 1]
   span = (py <= yi) == (py > yj)
   x_inter = xi + (py - yi) * (xj - xi) / jnp.where(yj != yi, yj - yi, 1.0)
   crossings = jnp.sum(used & span & (x_inter > px))
-  return jnp.where(crossings % 2 == 1, -dist, dist)
+  sd = jnp.where(in_box & (crossings % 2 == 1), -dist, dist)
+  return jnp.where(has_nan, jnp.nan, jnp.where(infinite, jnp.inf, sd))
 
 
 def circle_signed_distance_one(center, radius, point):
-  """Signed distance from one point to one circle: |p - c| - r (float32 [])."""
-  d = point - center
-  return _safe_sqrt(jnp.sum(d * d)) - radius
+  """Signed distance from one point to one circle: |p - c| - r (float32 []).
+
+  Far points get their true distance (offsets above 2**60 m are scaled before
+  squaring); +inf for a point with an infinite coordinate, NaN for a NaN one.
+  """
+  has_nan = jnp.any(jnp.isnan(point))
+  infinite = ~has_nan & ~jnp.all(jnp.isfinite(point))
+  d = jnp.where(jnp.isfinite(point), point, 0.0) - center
+  scale = _scale_of(jnp.max(jnp.abs(d)))
+  d = d / scale
+  sd = _safe_sqrt(jnp.sum(d * d)) * scale - radius
+  return jnp.where(has_nan, jnp.nan, jnp.where(infinite, jnp.inf, sd))
 
 
 def signed_distance_one(shapes: Shapes, point):
   """float32 [P + C]: signed distance from one point to every slot (polygons, then circles).
 
   Inactive slots, polygons with fewer than 3 vertices and non-finite shapes give
-  +inf with a zero gradient.
+  +inf with a zero gradient. A point with a NaN coordinate gives NaN for every
+  slot; one with an infinite coordinate +inf (outside every shape).
   """
   n = shapes.num_vertices
   ok_p = (shapes.polygon_active & (n >= 3) & (n <= shapes.vertices.shape[1])
@@ -111,7 +155,8 @@ def signed_distance_one(shapes: Shapes, point):
   cen = jnp.where(ok_c[:, None], shapes.center, 0.0)
   rad = jnp.where(ok_c, shapes.radius, 1.0)
   sd_c = jax.vmap(circle_signed_distance_one, in_axes=(0, 0, None))(cen, rad, point)
-  return jnp.concatenate([jnp.where(ok_p, sd_p, jnp.inf), jnp.where(ok_c, sd_c, jnp.inf)])
+  sd = jnp.concatenate([jnp.where(ok_p, sd_p, jnp.inf), jnp.where(ok_c, sd_c, jnp.inf)])
+  return jnp.where(jnp.any(jnp.isnan(point)), jnp.nan, sd)
 
 
 def _check_points(points):
@@ -153,7 +198,9 @@ def signed_distance(shapes: Shapes, points) -> jax.Array:
 
   Returns:
     float32 [N, P + C] metres, polygons first then circles; negative inside;
-    +inf (zero gradient) for inactive or malformed slots.
+    +inf (zero gradient) for inactive or malformed slots. Far points get their
+    true (finite) distance; a point with an infinite coordinate gets +inf
+    (outside every shape) and one with a NaN coordinate NaN in every column.
 
   Raises:
     ValueError: points not [N, 2] floats; Shapes leaves of the wrong shape.
@@ -163,8 +210,14 @@ def signed_distance(shapes: Shapes, points) -> jax.Array:
 
 
 def _membership(sd, width, margin):
+  """Soft membership of signed distances: 0 for +inf (outside) and, by convention, for NaN."""
   m = jax.nn.sigmoid((margin - sd) / width)
   return jnp.where(jnp.isfinite(sd), m, 0.0)
+
+
+def _nan_points(points, out):
+  """NaN where a point has a NaN coordinate: no answer exists there, and it must not look like one."""
+  return jnp.where(jnp.any(jnp.isnan(points), axis=-1), jnp.nan, out)
 
 
 def _sorted_slots(shapes: Shapes):
@@ -188,7 +241,7 @@ def _composite(m, values, background, perm, overlay_type: int):
 
 
 def _cost_of(value):
-  """Nav2 mask cost round-half-away(2.54 d) as float32 (spec §1.4); -1..100 only."""
+  """Nav2 mask cost round-half-away(2.54 d) as float32 (docs/nav2_semantics.md §1.4); -1..100 only."""
   d = value.astype(jnp.int32)
   return ((d * 254 + 50) // 100).astype(_F32)
 
@@ -209,7 +262,7 @@ def _keepout_cost(shapes, points, width, margin, default_value, overlay_type):
       m = jnp.where(known, m, 0.0)
     return _composite(m, cost, bg, perm, overlay_type)
 
-  out = jax.vmap(one)(points)
+  out = _nan_points(points, jax.vmap(one)(points))
   return jnp.where((width > 0) & jnp.isfinite(width), out, jnp.nan)
 
 
@@ -232,8 +285,10 @@ def soft_keepout_cost(shapes: Shapes, points, *, width, margin=0.0,
 
   Returns:
     float32 [N], Nav2 cost units in [0, 254]: what the keepout filter would
-    write over a free (0) costmap as width -> 0. NaN for a traced width that
-    is not finite and > 0.
+    write over a free (0) costmap as width -> 0. Far points and points with
+    an infinite coordinate lie outside every zone (the background's cost,
+    0 by default). NaN for a point with a NaN coordinate and for a traced
+    width that is not finite and > 0.
 
   Raises:
     ValueError: bad points, width <= 0, OVERLAY_MIN, default_value out of range.
@@ -253,7 +308,7 @@ def zone_speed_limits(shapes: Shapes, info: FilterInfo, no_limit) -> jax.Array:
 
   Limit = d * multiplier + base for the slot's value d; d == 0, a limit of 0,
   a percent limit outside [0, 100] or an absolute limit < 0 mean no limit
-  (spec §5). Slots of value -1 get NaN (they are transparent in the blend).
+  (docs/nav2_semantics.md §5). Slots of value -1 get NaN (they are transparent in the blend).
 
   Args:
     shapes: Shapes (no leading [M]).
@@ -288,7 +343,7 @@ def _speed_limit(shapes, info, points, width, margin, no_limit, default_value, l
     m = jnp.where(known, _membership(signed_distance_one(shapes, point), width, margin), 0.0)
     return _composite(m, lim, bg, perm, OVERLAY_SEQ)
 
-  out = jax.vmap(one)(points)
+  out = _nan_points(points, jax.vmap(one)(points))
   return jnp.where((width > 0) & jnp.isfinite(width), out, jnp.nan)
 
 
@@ -314,7 +369,9 @@ def soft_speed_limit(shapes: Shapes, info: FilterInfo, points, *, width, no_limi
   Returns:
     float32 [N] in the filter's unit (percent or m/s); tends to the hard
     SpeedFilter limit (its 0.0 "no limit" read as `no_limit`) as width -> 0.
-    NaN for a traced width that is not finite and > 0.
+    Far points and points with an infinite coordinate lie outside every zone
+    (the background's limit). NaN for a point with a NaN coordinate and for
+    a traced width that is not finite and > 0.
 
   Raises:
     ValueError: bad points, width <= 0, info type not 1 or 2, limits of the

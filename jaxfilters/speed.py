@@ -1,4 +1,4 @@
-"""SpeedFilter (spec §5): the speed limit under each robot, as carried state.
+"""SpeedFilter (docs/nav2_semantics.md §5): the speed limit under each robot, as carried state.
 
 Nav2 publishes a `SpeedLimit` only when the limit changes, keeps the previous
 limit on unknown or off-mask cells, and uses 0.0 for "no limit". Here that is
@@ -15,8 +15,9 @@ float64; the limit value itself is the float32 rounding of that double, so
 documented in README.md's float policy).
 
 Public functions are jitted at the edge (inline inside a caller's `jit`). A
-robot whose traced `mask_index` is outside [0, M) gets `valid` False,
-`error` True and its state untouched (eager calls raise instead).
+robot whose traced `mask_index` is outside [0, M), or whose mask has traced
+geometry that is unusable (`types.mask_geometry_ok`), gets `valid` False,
+`error` True and its state untouched (eager calls raise for a bad index).
 """
 
 from __future__ import annotations
@@ -30,7 +31,9 @@ import numpy as np
 
 from jaxfilters import constants
 from jaxfilters import geometry
-from jaxfilters.types import FilterInfo, FilterMask, pytree_dataclass, per_robot_bool, robot_inputs
+from jaxfilters.mask_lookup import mask_cell, mask_leaves, transform_point
+from jaxfilters.types import (FilterInfo, FilterMask, mask_geometry_ok, per_robot_bool, pytree_dataclass,
+                              robot_inputs)
 
 _F32 = jnp.float32
 
@@ -67,8 +70,10 @@ class SpeedResult:
     valid: bool [B], a limit was computed this cycle (False off-mask, on an
       unknown cell, for a mask whose type is not 1 or 2, when disabled, or
       on an error).
-    error: bool [B], the robot's traced mask_index was outside [0, M) (or,
-      with lookahead, its traced path length outside [0, N]): nothing was
+    error: bool [B], the robot's traced mask_index was outside [0, M), its
+      mask's traced geometry is unusable (`types.mask_geometry_ok`: a
+      resolution that is not a normal float32 > 0, a non-finite origin) or,
+      with lookahead, its traced path length was outside [0, N]: nothing was
       computed and its state was kept. None only in a hand-built result.
   """
   speed_limit: jax.Array
@@ -80,7 +85,7 @@ class SpeedResult:
 
 @dataclasses.dataclass(frozen=True)
 class LookaheadConfig:
-  """SpeedFilter path lookahead parameters (spec §5.6), with Nav2's corrections.
+  """SpeedFilter path lookahead parameters (docs/nav2_semantics.md §5.6), with Nav2's corrections.
 
   Attributes:
     max_decel: m/s^2, must be negative to scale the distance with speed; a
@@ -100,18 +105,36 @@ class LookaheadConfig:
     object.__setattr__(self, "max_lookahead", max(float(self.max_lookahead), self.min_lookahead))
 
 
-def exact_sign_affine(d, multiplier, base, offset):
-  """Exact sign of d * multiplier + base - offset for float32 inputs (int32 [...])."""
-  terms = [*geometry.exact_product(d.astype(_F32), multiplier), base, -jnp.asarray(offset, _F32)]
-  return geometry.expansion_sign(terms)
+def speed_limit_value(d: jax.Array, info: FilterInfo) -> tuple[jax.Array, jax.Array]:
+  """Nav2's SpeedFilter rule for one mask value (docs/nav2_semantics.md §5.3).
+
+  Args:
+    d: int32 [] the raw mask value. info: FilterInfo with scalar leaves.
+
+  Returns:
+    (limit float32 [], Nav2's value for the cell: 0.0 for mask value 0 and for a
+    computed limit out of range (< 0, or > 100 in percent), else
+    `d * multiplier + base` rounded to float32; known bool [], False on an
+    unknown cell (-1) or when the info type is neither 1 (percent) nor 2 (m/s):
+    Nav2 then has no limit to apply).
+  """
+  percent = info.type == constants.SPEED_FILTER_PERCENT
+  typed = percent | (info.type == constants.SPEED_FILTER_ABSOLUTE)
+  raw = d.astype(_F32) * info.multiplier + info.base
+  below_zero = geometry.exact_sign_affine(d, info.multiplier, info.base, 0.0) < 0
+  above_100 = geometry.exact_sign_affine(d, info.multiplier, info.base, 100.0) > 0
+  out_of_range = below_zero | (percent & above_100)
+  limit = jnp.where((d == constants.SPEED_MASK_NO_LIMIT) | out_of_range, 0.0, raw)
+  return limit.astype(_F32), typed & (d != constants.SPEED_MASK_UNKNOWN)
 
 
 def speed_limit_at_one(data, mask_origin, mask_res, info: FilterInfo, xy):
-  """SpeedFilter::getSpeedLimitAtPose for one point (spec §5.3).
+  """SpeedFilter::getSpeedLimitAtPose for one point (docs/nav2_semantics.md §5.3).
 
   Args:
     data: int8 [Hm, Wm] the mask.
-    mask_origin, mask_res: float32 [2], [].
+    mask_origin: float32 [2], or a list of [2] parts whose exact sum is the host
+      origin (`mask_lookup.mask_leaves` gives them); mask_res: float32 [].
     info: FilterInfo with scalar leaves.
     xy: float32 [2] point in the mask frame.
 
@@ -119,22 +142,13 @@ def speed_limit_at_one(data, mask_origin, mask_res, info: FilterInfo, xy):
     (limit float32 [], valid bool []). Invalid off the mask, on d == -1, or when
     the info type is neither 1 (percent) nor 2 (absolute): Nav2 then has no mask.
   """
-  hm, wm = data.shape
-  mx, my, inside = geometry.world_to_cell(xy[0], xy[1], mask_origin, mask_res, wm, hm)
-  d = data[my, mx].astype(jnp.int32)
-  percent = info.type == constants.SPEED_FILTER_PERCENT
-  typed = percent | (info.type == constants.SPEED_FILTER_ABSOLUTE)
-  raw = d.astype(_F32) * info.multiplier + info.base
-  below_zero = exact_sign_affine(d, info.multiplier, info.base, 0.0) < 0
-  above_100 = exact_sign_affine(d, info.multiplier, info.base, 100.0) > 0
-  out_of_range = below_zero | (percent & above_100)
-  limit = jnp.where((d == constants.SPEED_MASK_NO_LIMIT) | out_of_range, 0.0, raw)
-  valid = inside & typed & (d != constants.SPEED_MASK_UNKNOWN)
-  return limit.astype(_F32), valid
+  d, inside = mask_cell(data, mask_origin, mask_res, xy)
+  limit, known = speed_limit_value(d, info)
+  return limit, inside & known
 
 
 def _publish_step(prev, limit, valid, enabled):
-  """Publish-on-change with keep-previous on invalid cycles (spec §5.4)."""
+  """Publish-on-change with keep-previous on invalid cycles (docs/nav2_semantics.md §5.4)."""
   ok = valid & enabled
   changed = ok & (limit != prev)
   new_prev = jnp.where(ok, limit, prev)
@@ -163,11 +177,6 @@ def speed_filter_one(state, data, mask_origin, mask_res, info, pose, enabled, tr
   return dataclasses.replace(state, speed_limit_prev=prev), out
 
 
-def transform_point(transform, xy):
-  """T_mask_from_global applied to one point [2]."""
-  return jnp.stack(geometry.transform_points(transform, xy[0], xy[1]))
-
-
 def _segment_distance(p, a, b):
   ab = b - a
   denom = jnp.sum(ab * ab)
@@ -177,7 +186,7 @@ def _segment_distance(p, a, b):
 
 def speed_lookahead_one(state, data, mask_origin, mask_res, info, pose, path, path_len, new_path,
                         velocity, enabled, transform=None, *, config: LookaheadConfig):
-  """SpeedFilter::process with path lookahead for one robot (spec §5.6).
+  """SpeedFilter::process with path lookahead for one robot (docs/nav2_semantics.md §5.6).
 
   Args:
     state: SpeedState of one robot.
@@ -237,30 +246,30 @@ def speed_lookahead_one(state, data, mask_origin, mask_res, info, pose, path, pa
 
 
 def speed_inputs(mask, poses, state, mask_index, enabled, transform):
+  """Validates the speed filters' inputs: (B, then `types.robot_inputs`' tuple)."""
   if not isinstance(state, SpeedState):
     raise TypeError(f"state must be a SpeedState (SpeedState.create); got {type(state).__name__}")
   b = state.speed_limit_prev.shape[0]
   return (b, *robot_inputs(mask, poses, b, mask_index, enabled, transform))
 
 
-def mask_leaves(mask: FilterMask, i):
-  """(data [Hm, Wm], origin parts, resolution [], info) of mask i of the stack."""
-  origin = geometry.origin_terms(mask.origin[i], None if mask.origin_lo is None else mask.origin_lo[i])
-  return (mask.data[i], origin, mask.resolution[i], jax.tree.map(lambda x: x[i], mask.info))
-
-
 def guard_index(new_state, out, state, ok):
-  """Keeps a robot's state and marks its result invalid + error when its mask index is bad."""
+  """Keeps a robot's state and marks its result invalid + error where `ok` is False (bool []).
+
+  `ok` is False for a bad mask index or unusable mask geometry (value problems under jit).
+  """
   kept = jax.tree.map(lambda a, b: jnp.where(ok, a, b), new_state, state)
   out = dataclasses.replace(out, valid=out.valid & ok, error=~ok)
   if hasattr(out, "changed"):
     out = dataclasses.replace(out, changed=out.changed & ok)
+  if hasattr(out, "speed_limit"):          # the limit in force is the kept one
+    out = dataclasses.replace(out, speed_limit=jnp.where(ok, out.speed_limit, state.speed_limit_prev))
   return kept, out
 
 
 def speed_filter(mask: FilterMask, poses, state: SpeedState, *, mask_index=None, enabled=None,
                  transform=None) -> tuple[SpeedState, SpeedResult]:
-  """Nav2 SpeedFilter over a fleet, at each robot's pose (spec §5.3-§5.4).
+  """Nav2 SpeedFilter over a fleet, at each robot's pose (docs/nav2_semantics.md §5.3-§5.4).
 
   Jitted at the edge: an eager call compiles once per shape and runs with
   memory independent of B beyond the outputs; inside a caller's `jit` it inlines.
@@ -284,6 +293,8 @@ def speed_filter(mask: FilterMask, poses, state: SpeedState, *, mask_index=None,
 @jax.jit
 def _speed_filter_jit(mask, poses, state, idx, idx_ok, enabled, transform):
   with jax.named_scope("speed_filter"):
+    idx_ok = idx_ok & mask_geometry_ok(mask)[idx]
+
     def one(st, i, ok, pose, en, tf):
       new, out = speed_filter_one(st, *mask_leaves(mask, i), pose, en, tf)
       return guard_index(new, out, st, ok)
@@ -296,7 +307,7 @@ def speed_filter_lookahead(mask: FilterMask, poses, state: SpeedState, paths, pa
                            velocities, *, new_path=None, mask_index=None, enabled=None,
                            transform=None,
                            config: LookaheadConfig = LookaheadConfig()) -> tuple[SpeedState, SpeedResult]:
-  """Nav2 SpeedFilter with `enable_path_lookahead` over a fleet (spec §5.6).
+  """Nav2 SpeedFilter with `enable_path_lookahead` over a fleet (docs/nav2_semantics.md §5.6).
 
   The strictest (smallest non-zero) limit along each robot's path within the
   lookahead distance is published; robots with path_lengths 0 use the plain
@@ -348,6 +359,7 @@ def _lookahead_jit(mask, poses, state, paths, lengths, vel, new_path, idx, idx_o
   with jax.named_scope("speed_filter_lookahead"):
     # Traced lengths outside [0, N] are a value problem: such a robot is flagged, not clipped.
     len_ok = (lengths >= 0) & (lengths <= paths.shape[1])
+    idx_ok = idx_ok & mask_geometry_ok(mask)[idx]
 
     def one(st, i, ok, pose, path, n, npth, v, en, tf):
       new, out = speed_lookahead_one(st, *mask_leaves(mask, i), pose, path, jnp.where(ok, n, 0), npth, v,

@@ -1,6 +1,6 @@
-"""StaticLayer: OccupancyGrid data -> Nav2 costs (`StaticLayer::interpretValue`, spec §1.5).
+"""StaticLayer: OccupancyGrid data -> Nav2 costs (`StaticLayer::interpretValue`, docs/nav2_semantics.md §1.5).
 
-This is **not** the filters' mask conversion (§1.4, round(2.54 d)): the static
+This is **not** the filters' mask conversion (docs/nav2_semantics.md §1.4, round(2.54 d)): the static
 layer is trinary by default and maps the inscribed value 99 to 253 (pitfall 19).
 
 Nav2 reads each int8 cell as uint8 (so -1 becomes 255, -2 becomes 254, ...) and
@@ -133,7 +133,7 @@ def static_layer_table(config: StaticLayerConfig = StaticLayerConfig()) -> np.nd
 
 
 def static_layer(data, *, config: StaticLayerConfig = StaticLayerConfig()) -> jax.Array:
-  """Converts OccupancyGrid data to StaticLayer costs, cell by cell (spec §1.5).
+  """Converts OccupancyGrid data to StaticLayer costs, cell by cell (docs/nav2_semantics.md §1.5).
 
   Args:
     data: int8 array of any shape, e.g. [H, W] or [B, H, W]: OccupancyGrid

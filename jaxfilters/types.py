@@ -1,11 +1,13 @@
 """Device data model: pytrees for filter info, masks and batched costmaps.
 
-Every field is a traced leaf (STYLE.md habit 2), so a fleet whose robots use
-different resolutions, origins, bases or multipliers compiles once, and
-replacing a mask's contents with one of the same shape never recompiles.
-Factories (`create`) validate on the host and raise `ValueError` naming what
-was expected and what was given (habit 3); the dataclass constructors stay
-dumb records because JAX rebuilds them under `jit`/`vmap`.
+Every field is a traced leaf, so a fleet whose robots use different
+resolutions, origins, bases or multipliers compiles once, and replacing a
+mask's contents with one of the same shape never recompiles. Factories
+(`create`) validate on the host and raise `ValueError` naming what was expected
+and what was given; the dataclass constructors stay dumb records because JAX
+rebuilds them under `jit`/`vmap`. Under `jit` the static parts (shapes, dtypes)
+are checked at trace time (`check_mask`, `check_costmap`) and traced geometry
+values are judged by `mask_geometry_ok` / `costmap_geometry_ok`.
 """
 
 from __future__ import annotations
@@ -190,13 +192,29 @@ class FilterMask:
   def with_data(self, data) -> "FilterMask":
     """Returns this mask with new cell contents of the same shape (no recompile).
 
+    Works eagerly and inside a caller's `jit`. Eager (a concrete array) every
+    value is checked. Traced (inside `jit`), the values cannot be read, so only
+    what is static is checked: the shape, and the dtype, which must be int8 (an
+    int32 array would wrap silently when cast; cast it yourself, e.g. with
+    `jnp.clip(x, -128, 127).astype(jnp.int8)`, where you know its range).
+
     Args:
       data: integer [M, H, W] (or [H, W] for M = 1) values that fit int8.
 
     Raises:
       ValueError: data of another shape, a non-integer dtype (floats such as
-        99.9 or NaN are refused, never truncated), or values outside int8.
+        99.9 or NaN are refused, never truncated), values outside int8 (eager),
+        or a traced array that is not int8.
     """
+    if isinstance(data, jax.core.Tracer):
+      arr = data[None] if data.ndim == 2 else data
+      if tuple(arr.shape) != tuple(self.data.shape):
+        raise ValueError(f"new mask data must have shape {tuple(self.data.shape)} (or [H, W] "
+                         f"for M = 1); got {tuple(data.shape)}")
+      if arr.dtype != jnp.int8:
+        raise ValueError(f"FilterMask.with_data: traced new mask data must be int8 (its values cannot be "
+                         f"checked under jit, and a cast would wrap them); got {arr.dtype}")
+      return dataclasses.replace(self, data=arr)
     arr = np.asarray(data)
     if arr.ndim == 2:
       arr = arr[None]
@@ -210,31 +228,62 @@ class FilterMask:
 def check_mask(mask: FilterMask, where: str) -> None:
   """Static checks of a FilterMask pytree that reaches a public function (works under jit).
 
+  A mask built as a pytree (not through `FilterMask.create`) may have any leaves;
+  the shapes and dtypes are static, so they are checked here, at trace time.
+  Values (a NaN resolution, say) are not: see `mask_geometry_ok`.
+
   Raises:
     TypeError: not a FilterMask.
-    ValueError: wrong dtypes or shapes of its leaves (a hand-built pytree).
+    ValueError: wrong dtypes or shapes of its leaves, naming the leaf and the
+      shape expected (data int8 [M, H, W] with M, H, W >= 1; origin float [M, 2];
+      resolution float [M]; info leaves [M]; origin_lo float [M, 2, 2] or None).
   """
   if not isinstance(mask, FilterMask):
     raise TypeError(f"{where}: mask must be a FilterMask (FilterMask.create); got {type(mask).__name__}")
+  if not isinstance(mask.info, FilterInfo):
+    raise TypeError(f"{where}: mask.info must be a FilterInfo; got {type(mask.info).__name__}")
   d = mask.data
   if getattr(d, "ndim", None) != 3 or d.dtype != jnp.int8:
     raise ValueError(f"{where}: mask.data must be int8 [M, H, W]; got {getattr(d, 'dtype', None)}"
                      f"{tuple(getattr(d, 'shape', ()))}")
+  if 0 in d.shape:
+    raise ValueError(f"{where}: mask.data must be int8 [M, H, W] with M, H and W >= 1 (at least one "
+                     f"mask of at least one cell); got shape {tuple(d.shape)}")
   m = d.shape[0]
   expect = {"origin": ((m, 2), "floating"), "resolution": ((m,), "floating"),
             "info.type": ((m,), "integer"), "info.base": ((m,), "floating"),
             "info.multiplier": ((m,), "floating")}
   leaves = {"origin": mask.origin, "resolution": mask.resolution, "info.type": mask.info.type,
             "info.base": mask.info.base, "info.multiplier": mask.info.multiplier}
+  if mask.origin_lo is not None:
+    expect["origin_lo"] = ((m, 2, 2), "floating")
+    leaves["origin_lo"] = mask.origin_lo
   for name, (shape, kind) in expect.items():
     v = leaves[name]
     dt = getattr(v, "dtype", None)
     ok_kind = dt is not None and jnp.issubdtype(dt, jnp.floating if kind == "floating" else jnp.integer)
     if tuple(getattr(v, "shape", ())) != shape or not ok_kind:
-      raise ValueError(f"{where}: mask.{name} must be {kind} {shape}; got {dt}{tuple(getattr(v, 'shape', ()))}")
-  if mask.origin_lo is not None and tuple(mask.origin_lo.shape) != (m, 2, 2):
-    raise ValueError(f"{where}: mask.origin_lo must be float32 ({m}, 2, 2) or None; got "
-                     f"{tuple(mask.origin_lo.shape)}")
+      raise ValueError(f"{where}: mask.{name} must be {kind} {shape} (M = {m} masks, from mask.data "
+                       f"{tuple(d.shape)}); got {dt}{tuple(getattr(v, 'shape', ()))}")
+
+
+def mask_geometry_ok(mask: FilterMask) -> jax.Array:
+  """Whether each mask's geometry can be used, as a traced value: bool [M].
+
+  `FilterMask.create` refuses bad geometry on the host; a mask whose leaves are
+  replaced under `jit` (or built as a pytree) can still carry anything. A mask is
+  usable when its resolution is finite and at least the smallest normal float32
+  (1.18e-38; so 0, negative, NaN, inf and subnormal resolutions are not) and its
+  origin parts (`origin`, and `origin_lo` when present) are finite. Every filter
+  and point query treats a robot or point on an unusable mask as it treats a bad
+  mask index: `valid` False and `error` True (filters), the fill value (queries).
+  """
+  r = mask.resolution
+  ok = jnp.isfinite(r) & (r >= validate.F32_TINY)
+  ok = ok & jnp.all(jnp.isfinite(mask.origin), axis=-1)
+  if mask.origin_lo is not None:
+    ok = ok & jnp.all(jnp.isfinite(mask.origin_lo), axis=(-2, -1))
+  return ok
 
 
 def resolve_mask_index(mask: FilterMask, mask_index: jax.Array | None,
@@ -314,6 +363,15 @@ class Costmap:
   def create(cls, cost, origin, resolution) -> "Costmap":
     """Validates and builds a batch of costmaps, keeping float64 geometry exact.
 
+    Works eagerly and inside a caller's `jit`. A concrete argument is checked
+    in full (values included) and a float64 origin or resolution is carried
+    exactly (`validate.split_float64`). A traced argument (inside `jit`) is
+    checked for what is static only, its shape and dtype: traced `cost` must be
+    uint8, a traced origin or resolution must be floating point and is used as
+    its float32 value (float64 does not exist inside `jit` by default). Traced
+    geometry values are not checked here: `costmap_geometry_ok` says, as a
+    traced value, whether they are usable.
+
     Args:
       cost: uint8 [B, H, W] (or [H, W] for B = 1).
       origin: [B, 2] or [2] (broadcast to every robot), metres; a float64
@@ -321,43 +379,87 @@ class Costmap:
       resolution: [B] or scalar (broadcast), metres per cell; float64 kept exactly.
 
     Raises:
-      ValueError: wrong rank or dtype, batch mismatch, an empty grid, a
-        resolution not > 0 or not a normal float32, a non-finite origin.
+      ValueError: wrong rank or dtype, batch mismatch, an empty grid, and (for
+        concrete values) a resolution not > 0 or not a normal float32, a
+        non-finite origin.
     """
-    c = np.asarray(cost)
-    if c.ndim == 2:
-      c = c[None]
-    if c.ndim != 3 or 0 in c.shape:
-      raise ValueError(f"cost must be a non-empty uint8 [B, H, W]; got shape {c.shape}")
-    if c.dtype != np.uint8:
-      raise ValueError(f"cost must have dtype uint8 (Nav2 costs 0..255); got {c.dtype}")
+    traced = lambda x: isinstance(x, jax.core.Tracer)
+    if traced(cost):
+      c = cost[None] if cost.ndim == 2 else cost
+      if c.ndim != 3 or 0 in c.shape:
+        raise ValueError(f"cost must be a non-empty uint8 [B, H, W]; got shape {tuple(c.shape)}")
+      if c.dtype != jnp.uint8:
+        raise ValueError(f"cost must have dtype uint8 (Nav2 costs 0..255); got {c.dtype}")
+    else:
+      c = np.asarray(cost)
+      if c.ndim == 2:
+        c = c[None]
+      if c.ndim != 3 or 0 in c.shape:
+        raise ValueError(f"cost must be a non-empty uint8 [B, H, W]; got shape {c.shape}")
+      if c.dtype != np.uint8:
+        raise ValueError(f"cost must have dtype uint8 (Nav2 costs 0..255); got {c.dtype}")
     b = c.shape[0]
-    o = np.asarray(validate.float32_values(origin, "origin", owner="Costmap.create").shape)
-    o64 = np.asarray(origin, np.float64)
-    if o64.shape == (2,):
-      o64 = np.broadcast_to(o64, (b, 2))
-    if o64.shape != (b, 2):
-      raise ValueError(f"Costmap.create: origin must be [B, 2] = ({b}, 2) or [2]; got {tuple(o)}")
-    validate.resolution_value(resolution, owner="Costmap.create")
-    r64 = np.asarray(resolution, np.float64)
-    if r64.ndim == 0:
-      r64 = np.broadcast_to(r64, (b,))
-    if r64.shape != (b,):
-      raise ValueError(f"Costmap.create: resolution must be [B] = ({b},) or a scalar; got {r64.shape}")
-    try:
-      op = validate.split_float64(o64)
-      rp = validate.split_float64(r64)
-    except ValueError as e:
-      raise ValueError(f"Costmap.create: {e}") from None
     arr = lambda x: jnp.asarray(np.ascontiguousarray(x))
     lo = lambda x: None if not np.any(x) else arr(x)    # exactly float32: fewer exact terms
-    return cls(jnp.asarray(c), arr(op[..., 0]), arr(rp[..., 0]), lo(op[..., 1:]), lo(rp[..., 1:]))
+    if traced(origin):
+      o_hi, o_lo = _traced_float(origin, "origin", (2,), (b, 2)), None
+    else:
+      o = np.asarray(validate.float32_values(origin, "origin", owner="Costmap.create").shape)
+      o64 = np.asarray(origin, np.float64)
+      if o64.shape == (2,):
+        o64 = np.broadcast_to(o64, (b, 2))
+      if o64.shape != (b, 2):
+        raise ValueError(f"Costmap.create: origin must be [B, 2] = ({b}, 2) or [2]; got {tuple(o)}")
+      try:
+        op = validate.split_float64(o64)
+      except ValueError as e:
+        raise ValueError(f"Costmap.create: {e}") from None
+      o_hi, o_lo = arr(op[..., 0]), lo(op[..., 1:])
+    if traced(resolution):
+      r_hi, r_lo = _traced_float(resolution, "resolution", (), (b,)), None
+    else:
+      validate.resolution_value(resolution, owner="Costmap.create")
+      r64 = np.asarray(resolution, np.float64)
+      if r64.ndim == 0:
+        r64 = np.broadcast_to(r64, (b,))
+      if r64.shape != (b,):
+        raise ValueError(f"Costmap.create: resolution must be [B] = ({b},) or a scalar; got {r64.shape}")
+      try:
+        rp = validate.split_float64(r64)
+      except ValueError as e:
+        raise ValueError(f"Costmap.create: {e}") from None
+      r_hi, r_lo = arr(rp[..., 0]), lo(rp[..., 1:])
+    return cls(jnp.asarray(c), o_hi, r_hi, o_lo, r_lo)
 
   @classmethod
   def from_grid(cls, grid: OccupancyGrid, cost, num_robots: int) -> "Costmap":
     """A global costmap with `grid`'s geometry, repeated for `num_robots` robots."""
     c = np.broadcast_to(np.asarray(cost, np.uint8), (num_robots, *np.shape(cost)[-2:]))
     return cls.create(np.ascontiguousarray(c), grid.origin[:2], grid.resolution)
+
+
+def _traced_float(x, name: str, one: tuple[int, ...], full: tuple[int, ...]) -> jax.Array:
+  """A traced float argument of `Costmap.create` as float32 `full`, broadcast from `one` (static checks only)."""
+  if not jnp.issubdtype(x.dtype, jnp.floating):
+    raise ValueError(f"Costmap.create: {name} must be floating point; got {x.dtype}")
+  if tuple(x.shape) not in (one, full):
+    raise ValueError(f"Costmap.create: {name} must be {list(full)} or {list(one)}; got {tuple(x.shape)}")
+  return jnp.broadcast_to(x.astype(jnp.float32), full)
+
+
+def costmap_geometry_ok(costmap: Costmap) -> jax.Array:
+  """Whether each costmap's geometry can be used, as a traced value: bool [B].
+
+  As `mask_geometry_ok`: a resolution that is finite and at least the smallest
+  normal float32, finite origin parts (and finite `*_lo` parts when present).
+  """
+  r = costmap.resolution
+  ok = jnp.isfinite(r) & (r >= validate.F32_TINY) & jnp.all(jnp.isfinite(costmap.origin), axis=-1)
+  if costmap.origin_lo is not None:
+    ok = ok & jnp.all(jnp.isfinite(costmap.origin_lo), axis=(-2, -1))
+  if costmap.resolution_lo is not None:
+    ok = ok & jnp.all(jnp.isfinite(costmap.resolution_lo), axis=-1)
+  return ok
 
 
 def check_costmap(costmap: Costmap, where: str) -> None:
@@ -374,6 +476,9 @@ def check_costmap(costmap: Costmap, where: str) -> None:
   if getattr(c, "ndim", None) != 3 or c.dtype != jnp.uint8:
     raise ValueError(f"{where}: costmap.cost must be uint8 [B, H, W] (Nav2 costs 0..255); got "
                      f"{getattr(c, 'dtype', None)}{tuple(getattr(c, 'shape', ()))}")
+  if 0 in c.shape:
+    raise ValueError(f"{where}: costmap.cost must be uint8 [B, H, W] with B, H and W >= 1; got shape "
+                     f"{tuple(c.shape)}")
   b = c.shape[0]
   for name, v, shape in (("origin", costmap.origin, (b, 2)), ("resolution", costmap.resolution, (b,)),
                          ("origin_lo", costmap.origin_lo, (b, 2, 2)),

@@ -4,8 +4,8 @@ Every geometry value (resolution, origin, base, multiplier, speed caps) lives on
 the device as float32. A float64 that is finite on the host can become inf,
 0 or a subnormal in float32 (XLA flushes subnormals to zero), which would turn
 "resolution 1e-50" into a division by zero and every pose into "inside the
-mask". So values are checked *after* the float32 rounding (STYLE.md habit 15):
-finite, not subnormal, and for resolutions > 0 and not rounded to 0.
+mask". So values are checked *after* the float32 rounding, in the terms the
+device sees: finite, not subnormal, and for resolutions > 0 and not rounded to 0.
 
 Errors are `ValueError` with the owner, the name, what was expected and a
 shortened repr of what was given (long values are cut, so a hostile input

@@ -1,4 +1,4 @@
-"""ZoneParameterFilter (spec §7): mask value -> zone id -> a row of per-zone parameters.
+"""ZoneParameterFilter (docs/nav2_semantics.md §7): mask value -> zone id -> a row of per-zone parameters.
 
 Nav2 sets ROS parameters on other nodes; here each zone is a row of a table of
 P float parameters, and the filter yields, per robot, the parameter values in
@@ -10,11 +10,12 @@ force after Nav2's rules:
 * leaving the mask applies state 0 with no state event; an unknown cell changes
   nothing; the first in-mask cycle always applies a state (an event 0 too);
 * a zone id with no configured row is an error in Nav2 (it throws): here the
-  robot's state is left untouched and `error` is set (value problems are masked,
-  STYLE.md habit 5);
+  robot's state is left untouched and `error` is set (under `jit` a value
+  problem is masked and flagged, never raised);
 * a mask whose info type is not 4 (zone parameter) is refused by Nav2: the
   filter is inert for that robot (state kept, no event, no error);
-* a traced `mask_index` outside [0, M) keeps the robot's state and sets `error`.
+* a traced `mask_index` outside [0, M), or a mask whose traced geometry is
+  unusable (`types.mask_geometry_ok`), keeps the robot's state and sets `error`.
 
 `zone_filter` is jitted at the edge (inlines inside a caller's `jit`).
 """
@@ -28,10 +29,9 @@ import jax.numpy as jnp
 import numpy as np
 
 from jaxfilters import constants
-from jaxfilters import geometry
 from jaxfilters import validate
-from jaxfilters.speed import mask_leaves, transform_point
-from jaxfilters.types import FilterMask, pytree_dataclass, robot_inputs
+from jaxfilters.mask_lookup import mask_cell, mask_leaves, transform_point
+from jaxfilters.types import FilterMask, mask_geometry_ok, pytree_dataclass, robot_inputs
 
 NUM_ZONES = 128  # int8 mask values 0..127
 
@@ -124,7 +124,8 @@ class ZoneResult:
     params: float32 [B, P], the parameter values in force.
     event: bool [B], Nav2 would publish a UInt8 state event (value `zone`).
     error: bool [B], the mask named a zone with no configuration (Nav2 throws),
-      or the robot's traced mask_index was outside [0, M).
+      the robot's traced mask_index was outside [0, M), or its mask's traced
+      geometry is unusable (`types.mask_geometry_ok`).
   """
   zone: jax.Array
   params: jax.Array
@@ -139,20 +140,27 @@ def _apply(table, prev_zone, prev_params, new_zone):
   return jnp.where(table.sets[new_zone] & (new_zone != 0), table.values[new_zone], restored)
 
 
+def zone_cell(d):
+  """Nav2's ZoneParameterFilter rule for one mask value: (zone id int32 [] in 0..127, known bool []).
+
+  The zone id is the mask value (docs/nav2_semantics.md §7); a negative (unknown)
+  value is not a zone and changes nothing.
+  """
+  return jnp.clip(d, 0, NUM_ZONES - 1).astype(jnp.int32), d >= 0
+
+
 def zone_filter_one(state, table, data, mask_origin, mask_res, info, pose, enabled, transform):
   """ZoneParameterFilter::process for one robot (scalar leaves; see module docstring)."""
   # Nav2 only WARNs on non-default base/multiplier and ignores them; a type other
   # than 4 is refused, so such a mask drives nothing.
   enabled = enabled & (info.type == constants.ZONE_PARAMETER_FILTER)
-  hm, wm = data.shape
   xy = pose[:2] if transform is None else transform_point(transform, pose[:2])
-  mx, my, inside = geometry.world_to_cell(xy[0], xy[1], mask_origin, mask_res, wm, hm)
-  d = data[my, mx].astype(jnp.int32)
-  zid = jnp.clip(d, 0, NUM_ZONES - 1)
+  d, inside = mask_cell(data, mask_origin, mask_res, xy)
+  zid, known = zone_cell(d)
   # Outside: back to state 0 without an event (only if initialised and not already 0).
   leave = ~inside & state.initialized & (state.current != 0)
   # Inside a known cell: apply when uninitialised or different.
-  switch = inside & (d >= 0) & (~state.initialized | (zid != state.current))
+  switch = inside & known & (~state.initialized | (zid != state.current))
   error = switch & ~table.configured[zid]
   apply_in = switch & ~error
   new_zone = jnp.where(leave, 0, jnp.where(apply_in, zid, state.current))
@@ -193,6 +201,8 @@ def zone_filter(mask: FilterMask, poses, state: ZoneState, table: ZoneTable, *, 
 @jax.jit
 def _zone_jit(mask, poses, state, table, idx, idx_ok, enabled, transform):
   with jax.named_scope("zone_filter"):
+    idx_ok = idx_ok & mask_geometry_ok(mask)[idx]
+
     def one(st, i, ok, pose, en, tf):
       new, out = zone_filter_one(st, table, *mask_leaves(mask, i), pose, en & ok, tf)
       return new, ZoneResult(out.zone, out.params, out.event, out.error | ~ok)

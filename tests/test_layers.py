@@ -1,4 +1,4 @@
-"""StaticLayer (§1.5) and InflationLayer (§9.3) against plain float64 NumPy references.
+"""StaticLayer (docs/nav2_semantics.md §1.5) and InflationLayer (§9.3) against plain float64 NumPy references.
 
 Every kernel runs four ways on one case table: the reference, eager JAX,
 `jax.jit`, and `jax.vmap` of the per-robot kernel against a Python loop, with

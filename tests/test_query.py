@@ -39,8 +39,11 @@ def _stack(rng, types, bases, mults):
 
 
 def _cell_ref(mask, i, x, y):
-  """(d, inside) by exact rationals on the float32 values."""
+  """(d, inside) by exact rationals on the values Nav2 holds: the host float64 origin (all its parts)."""
   ox, oy = (F(float(v)) for v in np.asarray(mask.origin[i]))
+  if mask.origin_lo is not None:
+    lo = np.asarray(mask.origin_lo[i], np.float64)
+    ox, oy = ox + F(lo[0, 0]) + F(lo[0, 1]), oy + F(lo[1, 0]) + F(lo[1, 1])
   res = F(float(np.asarray(mask.resolution[i])))
   if not (math.isfinite(x) and math.isfinite(y)):
     return None, False

@@ -17,7 +17,7 @@ import pytest
 from hypothesis import given, strategies as st
 
 from tests.compile_count import count_compiles
-from jaxfilters import constants
+from jaxfilters import constants, geometry
 from jaxfilters import shapes as S
 from jaxfilters.grid import OccupancyGrid
 from jaxfilters.keepout import KeepoutState, keepout_filter
@@ -318,7 +318,7 @@ def test_exact_sign_matches_fractions(seed):
   small = np.float32(rng.standard_normal((n // 2, lanes)) * 2.0 ** rng.integers(-60, -20, (n // 2, lanes)))
   small[:, rng.random(lanes) < 0.4] = 0.0
   terms = np.concatenate([big, -big + small])[rng.permutation(n)]
-  sign, resolved = jax.jit(S.exact_sign)(jnp.asarray(terms))
+  sign, resolved = jax.jit(geometry.exact_sign)(jnp.asarray(terms))
   assert np.asarray(resolved).all()
   for lane in range(lanes):
     exact = sum(Fraction(float(v)) for v in terms[:, lane])

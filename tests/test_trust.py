@@ -1,10 +1,10 @@
-"""Issue 7 regressions: each test failed on the commit before the fix (no silent wrong result).
+"""No silent wrong result: each test failed on the code before its fix.
 
-Items: escape mode on unknown cells (1), the pipeline's updateBounds pass (2),
+Covered: escape mode on unknown cells (1), the pipeline's updateBounds pass (2),
 the zone filter's type gate (3), out-of-range mask_index eager and under jit
 (4), values checked in float32 terms where they enter (5), eager calls that
 neither copy the mask per robot nor recompile (10), Nav2's doubles kept exact
-(11).
+(11); the numbers are this file's section headings.
 """
 
 import dataclasses
@@ -202,7 +202,7 @@ def test_keepout_refuses_a_costmap_that_is_not_uint8(dtype):
 
 
 def test_keepout_refuses_a_mask_stack_its_int32_indices_would_wrap():
-  # M (Hm + 2H) (Wm + 2W) >= 2^31 used to wrap the flat int32 mask index and read
+  # M (Hm + 2H) (Wm + 2W) >= 2^31 would wrap the flat int32 mask index and read
   # another cell. The shapes decide it, so an abstract 2.1 GB stack is enough.
   cm = jf.Costmap.create(np.zeros((1, 8, 8), np.uint8), (0.0, 0.0), 1.0)
   small = _keepout_mask(np.full((3, 3), 100))
@@ -243,7 +243,7 @@ def test_eager_speed_filter_compiles_once_without_per_robot_mask_copies():
 
 @pytest.mark.parametrize("res, first", [(0.05, 21), (np.float32(0.05), 20)])
 def test_coarse_mask_example_uses_the_costmap_double(res, first):
-  """Spec §4.3: master res 0.05 at (0, 0), mask res 0.1 at (1, 1): Nav2 starts at column 21."""
+  """docs/nav2_semantics.md §4.3: master res 0.05 at (0, 0), mask res 0.1 at (1, 1): Nav2 starts at column 21."""
   mask = _keepout_mask(np.full((10, 10), 100), 0.1, (1.0, 1.0))
   cm = jf.Costmap.create(np.zeros((50, 50), np.uint8), (0.0, 0.0), res)
   out, _ = jf.keepout_filter(cm, mask, np.zeros((1, 3), np.float32), jf.KeepoutState.create(1))
