@@ -260,3 +260,15 @@ def test_soft_zones_nan_points_give_nan():
 def test_soft_zones_far_point_gradients_are_finite():
   g = jax.grad(lambda p: jf.soft_keepout_cost(SHAPES, p[None], width=0.1)[0])(jnp.float32([2e19, 0.5]))
   assert np.isfinite(np.asarray(g)).all()
+
+
+def test_nav2_costmap_readout_reads_the_keepout_filters_cell_at_origin_minus_15_1():
+  """The params bundle's keepout readout goes through the same cell rule as keepout_filter's zone test."""
+  data = np.zeros((1, 6), np.int8)
+  data[0, 3] = 100                                   # cell 3 lethal, cell 2 free
+  keepout = _mask(data, 1.0, (-15.1, 0.0), jf.FilterInfo.create(0))
+  costmap = jf.Nav2Costmap.from_masks(keepout=keepout)
+  poses = np.array([[np.float32(-12.1), 0.5, 0.0], [np.float32(-11.1), 0.5, 0.0]], np.float32)
+  got = np.asarray(costmap.readout(poses).keepout_cost)
+  assert got.tolist() == [0, 254]                    # exact floor: cell 2, then cell 3
+  assert got.tolist() == np.asarray(jf.keepout_cost_at(keepout, poses[:, :2])).tolist()

@@ -28,7 +28,8 @@ from jaxfilters import constants
 from jaxfilters import geometry
 from jaxfilters import validate
 from jaxfilters.binary import BinaryResult, BinaryState, binary_filter
-from jaxfilters.keepout import KeepoutConfig, occ_to_cost
+from jaxfilters.keepout import KeepoutConfig
+from jaxfilters.query import keepout_cost_at
 from jaxfilters.speed import LookaheadConfig, SpeedResult, SpeedState, speed_filter
 from jaxfilters.types import FilterMask, pytree_dataclass, check_poses
 from jaxfilters.zone import NUM_ZONES, ZoneResult, ZoneState, ZoneTable, zone_filter
@@ -409,12 +410,6 @@ class Nav2Costmap:
 
 
 
-def _keepout_cost_one(data, origin, res, xy):
-  h, w = data.shape
-  mx, my, inside = geometry.world_to_cell(xy[0], xy[1], origin, res, w, h)
-  return jnp.where(inside, occ_to_cost(data[my, mx]), jnp.uint8(constants.NO_INFORMATION))
-
-
 @jax.jit
 def _readout(parts, poses):
   b = poses.shape[0]
@@ -427,8 +422,7 @@ def _readout(parts, poses):
     x, y = poses[:, 0], poses[:, 1]
     if tf is not None:
       x, y = geometry.transform_points(tf, x, y)
-    keepout = jax.vmap(lambda p: _keepout_cost_one(mask.data[0], mask.origin[0], mask.resolution[0], p))(
-        jnp.stack([x, y], axis=1))
+    keepout = keepout_cost_at(mask, jnp.stack([x, y], axis=1), mask_index=jnp.zeros((b,), jnp.int32))
   if "binary" in parts:
     mask, tf, (default_state, threshold) = parts["binary"]
     _, binary = binary_filter(mask, poses, BinaryState.create(b), default_state=default_state,
