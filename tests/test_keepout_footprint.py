@@ -322,7 +322,7 @@ def test_moved_zones_compile_nothing():
   cfg = _config("rect")
   mask, poses, _ = _fleet(11)
   cm = _costmaps(poses, np.random.default_rng(0))
-  _cycle(cm, mask, poses, jf.KeepoutState.create(B), cfg)
+  jax.block_until_ready(_cycle(cm, mask, poses, jf.KeepoutState.create(B), cfg))
   moved = mask.with_data(np.roll(np.asarray(mask.data), 3, axis=2))      # every zone 3 cells to the right
   with count_compiles() as compiles:
     _, st2 = _cycle(cm, moved, poses, jf.KeepoutState.create(B), cfg)
