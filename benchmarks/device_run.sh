@@ -4,9 +4,8 @@
 # measures every figure (filters, pipeline, fleet with filters and bare MJX, baselines,
 # the C++ peer, copy bandwidth) into $OUT/bench.json, soaks the fleet (SOAK=0 skips it),
 # and with RL=1 also runs benchmarks/rl_bench.py (needs the `rl` extra's wheels in .whl);
-# PROBES=1 adds the keepout probes (benchmarks/keepout_probe.py, pallas_probe.py,
-# prologue_probe.py) and the fleet breakdown (benchmarks/fleet_breakdown.py), each to
-# $OUT/*.json; TESTS=0 / BENCH=0 skip those parts. A summary table is printed last.
+# PROBES=1 adds the fleet breakdown (benchmarks/fleet_breakdown.py) to $OUT/fleet_breakdown.json;
+# TESTS=0 / BENCH=0 skip those parts. A summary table is printed last.
 # Fits the device tool's 10-minute call with RL=0 and PROBES=0.
 set -u
 OUT="${OUT:-/tmp/out}"
@@ -42,13 +41,7 @@ echo "bench rc=$?"
 fi
 
 if [ "${PROBES:-0}" = 1 ]; then
-  echo "== keepout probes and the fleet breakdown -> $OUT/{keepout_probe,pallas_probe,prologue_probe,fleet_breakdown}.json"
-  timeout 200 python3 -m benchmarks.keepout_probe --budget-s 170 --out "$OUT/keepout_probe.json" > /dev/null 2> "$OUT/probes.stderr"
-  echo "keepout_probe rc=$?"
-  timeout 330 python3 benchmarks/pallas_probe.py --budget-s 280 --out "$OUT/pallas_probe.json" > /dev/null 2>> "$OUT/probes.stderr"
-  echo "pallas_probe rc=$?"
-  timeout 200 python3 benchmarks/prologue_probe.py --budget-s 150 --out "$OUT/prologue_probe.json" > /dev/null 2>> "$OUT/probes.stderr"
-  echo "prologue_probe rc=$?"
+  echo "== the fleet breakdown -> $OUT/fleet_breakdown.json"
   timeout 300 python3 benchmarks/fleet_breakdown.py 65536 --time-budget "${BREAKDOWN_BUDGET:-240}" > "$OUT/fleet_breakdown.json" 2>> "$OUT/probes.stderr"
   echo "fleet_breakdown rc=$?"
 fi

@@ -8,7 +8,7 @@ Before a peer figure is timed its integers are checked: equal to `reference/nav2
 (float64, the same arithmetic) on the first robot, and equal to the JAX output on every
 robot it runs, cell for cell in the same frame; with a frame transform (SE2) except at
 cells whose float64 mask coordinate lies within `SE2_EDGE_BAND_M` of a mask-cell edge
-(JAX rotates cell centres in float32, as `jaxfilters.keepout` documents). A failed
+(JAX rotates cell centres in float32, as jaxfilters/keepout/reference.py documents). A failed
 check raises, so no ratio is reported against a peer that computes something else.
 """
 

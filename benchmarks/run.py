@@ -176,10 +176,10 @@ def bench_keepout(kind, sz, b, config=None):
                c, s, cells, "cells/s", bytes_per_cell=3)
   fig["cpp_peer"] = peer.result()
   try:   # which fast-path branches these inputs take (counts over the first 64 robots)
-    from jaxfilters import keepout as ko  # noqa: PLC0415
+    from benchmarks.keepout_paths import path_report  # noqa: PLC0415
     cm, mask, tf = sets[0]
     sub = min(b, 64)
-    fig["paths"] = ko._path_report(jax.tree.map(lambda x: x[:sub], cm), mask, None if tf is None else tf[:sub])
+    fig["paths"] = path_report(jax.tree.map(lambda x: x[:sub], cm), mask, None if tf is None else tf[:sub])
   except Exception as e:  # noqa: BLE001 - a report, never a reason to lose the figure
     fig["paths"] = f"unavailable: {type(e).__name__}: {e}"
   return fig

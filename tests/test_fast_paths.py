@@ -3,7 +3,7 @@
 `keepout_filter` runs the fast paths (the same-frame slice where a robot's mask
 cells are consecutive, with `KeepoutConfig(aligned_fast_path=True)`, the default;
 otherwise a separable gather; the bracketed other-frame path with a transform);
-`_keepout_filter_jit(exact=True)` runs the exact per-cell path on every cell. They
+`process.filter_batch(exact=True)` runs the exact per-cell path on every cell. They
 must agree bit for bit, with both batch loops. tests/test_keepout_paths.py puts
 cell centres on mask-cell edges; these fleets are random.
 """
@@ -16,6 +16,8 @@ import numpy as np
 import pytest
 
 from jaxfilters import keepout as ko
+from jaxfilters.keepout import common, process, same_frame
+from jaxfilters.keepout import reference as keepout_reference
 from jaxfilters.grid import OccupancyGrid
 from jaxfilters.types import Costmap, FilterInfo, FilterMask
 from reference import nav2 as reference
@@ -51,10 +53,10 @@ def _fleet(seed, *, same_res=True, num_masks=1):
 
 def _run(cm, mask, state, window, mask_index, enabled, config, *, exact=False, loop="auto", transform=None):
   # One module-level jitted program per (config, exact, loop, shapes): no compile per call.
-  idx, ok, _, en, win, tf = ko._batched_inputs(cm, mask, jnp.zeros((B, 3)), mask_index, enabled, jnp.asarray(window),
-                                               transform, "test")
-  out, st = ko._keepout_filter_jit(cm, mask, idx, ok, ko._fill_error(state, B), win, en, tf, config=config,
-                                   exact=exact, loop=loop)
+  idx, ok, _, en, win, tf = common.batched_inputs(cm, mask, jnp.zeros((B, 3)), mask_index, enabled,
+                                                  jnp.asarray(window), transform, "test")
+  out, st = process.filter_batch(cm, mask, idx, ok, common.fill_error(state, B), win, en, tf, config=config,
+                                 exact=exact, loop=loop)
   return np.asarray(out.cost), np.asarray(st.last_pose_lethal)
 
 
@@ -85,21 +87,24 @@ def test_fast_path_matches_float64_reference(seed):
     np.testing.assert_array_equal(got[b], want)
 
 
-@pytest.mark.parametrize("loop,packed", [("map", None), ("vmap", False), ("vmap", True)])
+# "vmap" runs the slice on four cells per uint32 word when W % 4 == 0 (W = 16), bytewise otherwise
+# (the costmaps cropped to W = 14).
+@pytest.mark.parametrize("loop,width", [("map", W), ("vmap", W), ("vmap", W - 2)])
 @pytest.mark.parametrize("seed", range(4))
-def test_both_batch_loops_agree(seed, loop, packed):
+def test_both_batch_loops_agree(seed, loop, width):
   cm, mask, state, window, mask_index, enabled = _fleet(200 + seed, num_masks=3)
+  cm = dataclasses.replace(cm, cost=cm.cost[:, :, :width])
   cfg = ko.KeepoutConfig(override_lethal_cost=bool(seed % 2), lethal_override_cost=100)
-  idx, ok, _, en, win, _ = ko._batched_inputs(cm, mask, jnp.zeros((B, 3)), mask_index, enabled, jnp.asarray(window),
-                                              None, "test")
-  state = ko._fill_error(state, B)
-  cost, st = _same_frame(cm, mask, idx, ok, state, win, en, config=cfg, loop=loop, packed=packed)
+  idx, ok, _, en, win, _ = common.batched_inputs(cm, mask, jnp.zeros((B, 3)), mask_index, enabled,
+                                                 jnp.asarray(window), None, "test")
+  state = common.fill_error(state, B)
+  cost, st = _same_frame(cm, mask, idx, ok, state, win, en, config=cfg, loop=loop)
   want = _run(cm, mask, state, window, mask_index, enabled, cfg, exact=True)
   np.testing.assert_array_equal(np.asarray(cost), want[0])
   np.testing.assert_array_equal(np.asarray(st.last_pose_lethal), want[1])
 
 
-_same_frame = jax.jit(ko._same_frame_batch, static_argnames=("config", "loop", "packed"))
+_same_frame = jax.jit(same_frame.same_frame_batch, static_argnames=("config", "loop"))
 
 
 @pytest.mark.parametrize("seed", range(3))
@@ -130,12 +135,13 @@ def test_cost_plus_one_table_is_occ_to_cost_plus_one():
 def test_chunked_general_path_equals_one_vmap(monkeypatch):
   cm, mask, state, window, mask_index, enabled = _fleet(400, same_res=False)
   tf = jnp.asarray(np.float32(np.random.default_rng(1).uniform(-1, 1, (B, 3))))
-  idx, ok, _, en, win, tf = ko._batched_inputs(cm, mask, jnp.zeros((B, 3)), None, enabled, jnp.asarray(window), tf,
+  idx, ok, _, en, win, tf = common.batched_inputs(cm, mask, jnp.zeros((B, 3)), None, enabled, jnp.asarray(window), tf,
                                                "test")
-  state = ko._fill_error(state, B)
+  state = common.fill_error(state, B)
   # A fresh jit per run: the chunk size is read when the program is traced.
-  run = lambda: np.asarray(jax.jit(lambda c, s: ko._general_batch(dataclasses.replace(cm, cost=c), mask, idx, ok, s, win, en, tf,
-                                                                  config=ko.KeepoutConfig())[0])(cm.cost, state))
+  general = lambda c, s: keepout_reference.general_batch(dataclasses.replace(cm, cost=c), mask, idx, ok, s, win, en,
+                                                         tf, config=ko.KeepoutConfig())[0]
+  run = lambda: np.asarray(jax.jit(general)(cm.cost, state))
   whole = run()
-  monkeypatch.setattr(ko, "_GENERAL_CHUNK_CELLS", 2 * H * W)  # chunks of 2 robots, one remainder
+  monkeypatch.setattr(keepout_reference, "GENERAL_CHUNK_CELLS", 2 * H * W)  # chunks of 2 robots, one remainder
   np.testing.assert_array_equal(run(), whole)

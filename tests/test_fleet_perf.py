@@ -1,6 +1,6 @@
 """The fleet step's faster navigation stack chooses what the straightforward one chose.
 
-tests/planner_reference.py keeps the planner and navigation-field lookups as
+reference/planner.py keeps the planner and navigation-field lookups as
 they were before the performance work. Here the current code runs on the same
 inputs (robots at random free poses of the built-in warehouse, several close
 together so the collision monitor and the robots layer matter, some inside or

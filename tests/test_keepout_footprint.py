@@ -1,6 +1,6 @@
 """The footprint-aware keepout escape (jaxfilters/footprint.py) against the float64 reference.
 
-The rule is decided in float32 on the device; the reference (tests/reference.py)
+The rule is decided in float32 on the device; the reference (reference/nav2.py)
 computes it in float64 over every mask cell. Random cases compare with an
 undecided band of EPS metres around the footprint boundary (the device cannot
 do better in float32); the dyadic cases (0.25 m grid, yaw 0), where every
@@ -20,8 +20,8 @@ import pytest
 
 import jaxfilters as jf
 from jaxfilters import footprint as fp
-from jaxfilters import keepout as ko
 from reference import nav2 as reference
+from tests.compile_count import count_compiles
 
 EPS = 2e-5            # m: undecided band of the random cases (float32 on coordinates up to ~10 m)
 KEEPOUT = jf.FilterInfo.create(0)
@@ -322,11 +322,11 @@ def test_moved_zones_compile_nothing():
   cfg = _config("rect")
   mask, poses, _ = _fleet(11)
   cm = _costmaps(poses, np.random.default_rng(0))
-  _cycle(cm, mask, poses, jf.KeepoutState.create(B), cfg)
-  sizes = (ko._update_bounds_jit._cache_size(), ko._keepout_filter_jit._cache_size())
+  jax.block_until_ready(_cycle(cm, mask, poses, jf.KeepoutState.create(B), cfg))
   moved = mask.with_data(np.roll(np.asarray(mask.data), 3, axis=2))      # every zone 3 cells to the right
-  _, st2 = _cycle(cm, moved, poses, jf.KeepoutState.create(B), cfg)
-  assert (ko._update_bounds_jit._cache_size(), ko._keepout_filter_jit._cache_size()) == sizes
+  with count_compiles() as compiles:
+    _, st2 = _cycle(cm, moved, poses, jf.KeepoutState.create(B), cfg)
+  assert compiles() == 0
   datas = np.asarray(moved.data)
   for i in range(B):
     case = dict(data=datas[i], origin=ORIGIN, res=np.float32(0.05), pose=poses[i])

@@ -1,12 +1,11 @@
-"""The Pallas keepout kernel (jaxfilters.keepout_pallas) gives the XLA aligned path's integers.
+"""The Pallas keepout kernel (jaxfilters.keepout.pallas) gives the XLA aligned path's integers.
 
 On CPU the kernel runs in the Pallas interpreter (`PallasTuning(interpret=True)`):
 the same kernel program, discharged to XLA, so its indexing, masks and write rule
-are checked here; benchmarks/pallas_probe.py checks the compiled Triton kernel on a
-GPU against the XLA path. References: a NumPy loop over robots written from Nav2's
-rule (mask costs from tests/reference.py, no shared code), the XLA aligned kernels
-(`keepout._aligned_one`, `keepout._aligned_packed_one`), the exact per-cell path and
-the float64 reference `reference.keepout_process`.
+are checked here (the compiled Triton kernel runs on a GPU only). References: a NumPy
+loop over robots written from Nav2's rule (mask costs from reference/nav2.py, no shared
+code), the XLA aligned kernels (`same_frame.aligned_one`, `same_frame.aligned_packed_one`),
+the exact per-cell path and the float64 reference `reference.keepout_process`.
 """
 
 import dataclasses
@@ -18,11 +17,14 @@ import numpy as np
 import pytest
 
 from jaxfilters import keepout as ko
-from jaxfilters import keepout_pallas as kp
+from jaxfilters.keepout import common, packed, same_frame
+from benchmarks.keepout_paths import path_report
+from jaxfilters.keepout import pallas as kp
 from jaxfilters.grid import OccupancyGrid
-from jaxfilters.keepout_pallas import PallasTuning
+from jaxfilters.keepout import PallasTuning
 from jaxfilters.types import Costmap, FilterInfo, FilterMask
 from reference import nav2 as reference
+from tests.compile_count import count_compiles
 
 INT8 = np.arange(-128, 128)
 LUT = np.asarray([reference.mask_cost(v) for v in INT8])      # mask cost of int8 d at LUT[d + 128]
@@ -99,7 +101,7 @@ def test_kernel_equals_numpy_and_xla_aligned_path(shape, t):
   escape = bool((t + h) % 2)           # escape mode on for half of the cases, off for the others
   lethal_cost = 77
   cost, data, idx, sx, sy, x, y, take, lethal = _kernel_case(10 * t + h, b, h, w)
-  table = ko._cost_plus_one_table(jnp.asarray(data), h, w)
+  table = common.cost_plus_one_table(jnp.asarray(data), h, w)
   col_ok, row_ok = _flags(x, y, h, w)
   params = kp.slice_params(jnp.asarray(idx), jnp.asarray(sx), jnp.asarray(sy), col_ok, row_ok, jnp.asarray(take),
                            jnp.asarray(lethal))
@@ -112,15 +114,15 @@ def test_kernel_equals_numpy_and_xla_aligned_path(shape, t):
   config = ko.KeepoutConfig(override_lethal_cost=escape, lethal_override_cost=lethal_cost)
   state = dataclasses.replace(ko.KeepoutState.create(b), is_pose_lethal=jnp.asarray(lethal))
   rows_taken = row_ok & jnp.asarray(take)[:, None]
-  xla = jax.vmap(lambda c, i, a, s, co, ro, st: ko._aligned_one(c, table, i, a, s, co, ro, st, config=config))(
+  xla = jax.vmap(lambda c, i, a, s, co, ro, st: same_frame.aligned_one(c, table, i, a, s, co, ro, st, config=config))(
       jnp.asarray(cost), jnp.asarray(idx), jnp.asarray(sx), jnp.asarray(sy), col_ok, rows_taken, state)
   np.testing.assert_array_equal(got, np.asarray(xla))
   if w % 4 == 0:    # the packed (uint32 SWAR) XLA kernel, the GPU's XLA choice
-    words = ko._shifted_words(table)
-    packed = jax.vmap(lambda c, i, a, s, co, ro, st: ko._aligned_packed_one(c, words, i, a, s, co, ro, st,
-                                                                            config=config))(
+    words = packed.shifted_words(table)
+    by_words = jax.vmap(lambda c, i, a, s, co, ro, st: same_frame.aligned_packed_one(c, words, i, a, s, co, ro, st,
+                                                                                    config=config))(
         jnp.asarray(cost), jnp.asarray(idx), jnp.asarray(sx), jnp.asarray(sy), col_ok, rows_taken, state)
-    np.testing.assert_array_equal(got, np.asarray(packed))
+    np.testing.assert_array_equal(got, np.asarray(by_words))
 
 
 def test_slice_params_are_the_window_bounds():
@@ -139,7 +141,7 @@ def test_slice_params_are_the_window_bounds():
 def test_large_batches_run_in_chunks(monkeypatch):
   b, h, w = 5, 9, 13
   cost, data, idx, sx, sy, x, y, take, lethal = _kernel_case(7, b, h, w)
-  table = ko._cost_plus_one_table(jnp.asarray(data), h, w)
+  table = common.cost_plus_one_table(jnp.asarray(data), h, w)
   col_ok, row_ok = _flags(x, y, h, w)
   params = kp.slice_params(jnp.asarray(idx), jnp.asarray(sx), jnp.asarray(sy), col_ok, row_ok, jnp.asarray(take),
                            jnp.asarray(lethal))
@@ -249,22 +251,24 @@ def test_filter_with_pallas_equals_float64_reference(config):
   the sliced robots, the gather the others (robots at another resolution); disabled robots and a
   traced mask_index out of range are left untouched, the latter flagged."""
   run = _filter(config)
-  changed = 0
+  changed = recompiles = 0
   for seed, kwargs in enumerate(FLEETS):
     cm, mask, state, window, mask_index, enabled = _fleet(seed, **kwargs)
     mask_index[3] = 2                                                   # M = 2: out of range
-    got, st = run(cm, mask, state, window, mask_index, enabled)
+    with count_compiles() as compiles:
+      got, st = run(cm, mask, state, window, mask_index, enabled)
+    recompiles += compiles() if seed else 0                             # the first fleet compiles
     want = _reference_fleet(cm, mask, state, window, mask_index, enabled, config)
     np.testing.assert_array_equal(np.asarray(got), want, err_msg=f"fleet {kwargs}")
     np.testing.assert_array_equal(np.asarray(st.error), np.arange(6) == 3)
-    sliced = ko._path_report(cm, mask, mask_index=np.where(mask_index < 2, mask_index, 0))["sliced"]
+    sliced = path_report(cm, mask, mask_index=np.where(mask_index < 2, mask_index, 0))["sliced"]
     # Robots at another resolution are gathered, unless their window reads no mask cell
     # (wholly off the mask: then the slice reads only padding, and is taken).
     other = len(kwargs.get("other_res", ()))
     assert 6 - other <= sliced < 6 if other else sliced == 6, "the fleet must take the intended paths"
     changed += int(np.count_nonzero(want != np.asarray(cm.cost)))
   assert changed > 200
-  assert run._cache_size() == 1, "new fleets of the same shapes must not recompile"
+  assert recompiles == 0, "new fleets of the same shapes must not recompile"
 
 
 # ----------------------------------------------------------------------------- selection and options
@@ -273,7 +277,7 @@ def test_filter_with_pallas_equals_float64_reference(config):
 def test_kernel_option_is_validated():
   with pytest.raises(ValueError, match=r"kernel must be one of \('auto', 'xla', 'pallas'\); got 'triton'"):
     ko.KeepoutConfig(kernel="triton")
-  with pytest.raises(ValueError, match="pallas must be a keepout_pallas.PallasTuning; got dict"):
+  with pytest.raises(ValueError, match="pallas must be a keepout.pallas.PallasTuning; got dict"):
     ko.KeepoutConfig(pallas={"layout": "flat"})
   for kwargs, message in [(dict(layout="tiles"), r"layout must be one of \('flat', 'rows'\); got 'tiles'"),
                           (dict(block_cells=1000), r"block_cells must be a power of two in \[16, 65536\]; got 1000"),

@@ -4,10 +4,10 @@
 where they are consecutive) and other-frame cells through `world_to_index_checked`,
 falling back to the exact arithmetic where a bracket stays open. These tests compare
 the fast paths (both batch loops, plain and escape mode) with the per-cell exact path
-(`_keepout_filter_jit(exact=True)`) on fleets built to put cell centres exactly on
+(`process.filter_batch(exact=True)`) on fleets built to put cell centres exactly on
 mask-cell edges and one ulp either side, as well as at random; the exact path and the
 other-frame semantics (float32 rotation with rounded products, then the exact floor)
-against independent references (tests/reference.py in float64, and a NumPy float32
+against independent references (reference/nav2.py in float64, and a NumPy float32
 rotation with Fractions); and the new geometry helpers against Fractions with
 hypothesis.
 """
@@ -24,13 +24,12 @@ from hypothesis import given, strategies as st
 
 from jaxfilters import geometry
 from jaxfilters import keepout as ko
+from jaxfilters.keepout import common, other_frame, other_resolution, process, prologue, same_frame
+from jaxfilters.keepout import reference as keepout_reference
 from jaxfilters import validate
-from jaxfilters.grid import OccupancyGrid
-from jaxfilters.types import Costmap, FilterInfo, FilterMask
 from reference import nav2 as reference
+from tests.keepout_fleets import B, H, HM, M, W, WM, fleet
 
-KEEPOUT = FilterInfo.create(0)
-B, H, W, M, HM, WM = 6, 12, 16, 2, 20, 18       # one shape: each path compiles once
 PLAIN = ko.KeepoutConfig()
 ESCAPE = ko.KeepoutConfig(override_lethal_cost=True, lethal_override_cost=200)
 f32 = np.float32
@@ -40,9 +39,9 @@ f32 = np.float32
 
 
 def _run(cm, mask, state, window, mask_index, enabled, transform, config, **kw):
-  idx, ok, _, en, win, tf = ko._batched_inputs(cm, mask, jnp.zeros((B, 3)), mask_index, enabled, window,
+  idx, ok, _, en, win, tf = common.batched_inputs(cm, mask, jnp.zeros((B, 3)), mask_index, enabled, window,
                                                transform, "test")
-  cost, st = ko._keepout_filter_jit(cm, mask, idx, ok, ko._fill_error(state, B), win, en, tf, config=config, **kw)
+  cost, st = process.filter_batch(cm, mask, idx, ok, common.fill_error(state, B), win, en, tf, config=config, **kw)
   return np.asarray(cost.cost), np.asarray(st.last_pose_lethal)
 
 
@@ -54,22 +53,6 @@ def _fast_equals_exact(case, transform=None, configs=(PLAIN, ESCAPE), loops=("ma
       np.testing.assert_array_equal(got[0], want[0], err_msg=f"{cfg} {loop}")
       np.testing.assert_array_equal(got[1], want[1], err_msg=f"{cfg} {loop}")
   return want[0]
-
-
-def _fleet(rng, res, mres, origins, mask_origins, *, windows=None, b=B):
-  """b costmaps at `origins` [b, 2] (float64), M masks at `mask_origins` [M, 2]."""
-  data = rng.choice([-1, 0, 0, 1, 25, 50, 75, 99, 100, 100, 101, -128], (M, HM, WM)).astype(np.int8)
-  grids = [OccupancyGrid.create(np.clip(d, -1, 100), float(mres), tuple(o)) for d, o in zip(data, mask_origins)]
-  mask = FilterMask.create(grids, KEEPOUT).with_data(data)
-  cost = rng.choice([0, 0, 10, 100, 200, 252, 253, 254, 255], (b, H, W)).astype(np.uint8)
-  cm = Costmap.create(cost, np.asarray(origins, np.float64), res)
-  if windows is None:
-    x0, y0 = rng.integers(-2, W // 2, b), rng.integers(-2, H // 2, b)
-    windows = np.stack([x0, y0, x0 + rng.integers(1, W + 3, b), y0 + rng.integers(1, H + 3, b)], 1)
-    windows[0] = (0, 0, W, H)
-  state = dataclasses.replace(ko.KeepoutState.create(b), is_pose_lethal=jnp.asarray(rng.random(b) < 0.5))
-  enabled = jnp.asarray(rng.random(b) < 0.9).at[0].set(True)
-  return cm, mask, state, np.asarray(windows, np.int32), rng.integers(0, M, b).astype(np.int32), enabled
 
 
 def _nudge(x, steps):
@@ -85,7 +68,7 @@ def _nudge(x, steps):
 
 def test_mask_cost_u8_is_occ_to_cost_for_every_byte():
   d = np.arange(256, dtype=np.uint8).view(np.int8)
-  known, cost = ko._mask_cost_u8(jnp.asarray(d))
+  known, cost = common.mask_cost_u8(jnp.asarray(d))
   want = np.asarray(ko.occ_to_cost(jnp.asarray(d)))
   assert np.array_equal(np.asarray(known), want != 255)
   assert np.array_equal(np.asarray(cost)[np.asarray(known)], want[want != 255])
@@ -219,20 +202,20 @@ def _same_frame_cases():
   cases = []
   # The practical "aligned" case: a double costmap resolution against the float32 mask one.
   origins = np.round(rng.uniform(8.6, 9.8, (B, 2)) / 0.05) * 0.05
-  cases.append(_fleet(rng, 0.05, 0.05, origins, [(9.0, 9.5), (9.15, 9.0)]))
+  cases.append(fleet(rng, 0.05, 0.05, origins, [(9.0, 9.5), (9.15, 9.0)]))
   # Binary-exact equal resolutions, origins on the mask grid and one ulp off it.
   origins = np.round(rng.uniform(-3, 3, (B, 2)) * 4) / 4
   origins[1] = _nudge(origins[1, 0], 1), _nudge(origins[1, 1], -1)
-  cases.append(_fleet(rng, 0.25, 0.25, origins, [(0.0, -1.0), (-0.5, 0.25)]))
+  cases.append(fleet(rng, 0.25, 0.25, origins, [(0.0, -1.0), (-0.5, 0.25)]))
   # A finer mask (res / 2): every master centre lies exactly on a mask-cell edge.
   origins = np.round(rng.uniform(-2, 2, (B, 2)) * 4) / 4
   origins[2] = _nudge(origins[2, 0], -1), _nudge(origins[2, 1], 1)
-  cases.append(_fleet(rng, 0.5, 0.25, origins, [(0.0, 0.0), (-1.0, 0.5)]))
+  cases.append(fleet(rng, 0.5, 0.25, origins, [(0.0, 0.0), (-1.0, 0.5)]))
   # A coarser mask, decimal resolutions: the window clip's quotients sit near integers.
   origins = np.round(rng.uniform(-1, 1, (B, 2)) / 0.05) * 0.05
-  cases.append(_fleet(rng, 0.05, 0.1, origins, [(-0.5, -0.3), (0.1, -0.7)]))
+  cases.append(fleet(rng, 0.05, 0.1, origins, [(-0.5, -0.3), (0.1, -0.7)]))
   # Anything: random resolutions and origins.
-  cases.append(_fleet(rng, 0.03, 0.07, rng.uniform(-1, 1, (B, 2)), rng.uniform(-1, 0, (M, 2))))
+  cases.append(fleet(rng, 0.03, 0.07, rng.uniform(-1, 1, (B, 2)), rng.uniform(-1, 0, (M, 2))))
   return cases
 
 
@@ -266,7 +249,7 @@ def _se2_cases():
   # Binary-exact grids, yaw 0 and translations on the mask grid: every centre on an edge
   # (whole windows undecided), one ulp off it, and small windows (a few undecided cells).
   origins = np.round(rng.uniform(-2, 2, (B, 2)) * 4) / 4
-  case = _fleet(rng, 0.5, 0.25, origins, [(0.0, 0.0), (-0.75, 0.5)])
+  case = fleet(rng, 0.5, 0.25, origins, [(0.0, 0.0), (-0.75, 0.5)])
   tf = np.zeros((B, 3), np.float32)
   tf[:, :2] = np.round(rng.uniform(-1, 1, (B, 2)) * 4) / 4
   tf[1, 0], tf[2, 1] = _nudge(tf[1, 0], 1), _nudge(tf[2, 1], -1)
@@ -274,13 +257,13 @@ def _se2_cases():
   windows[3:] = [(2, 2, 5, 4), (0, 0, 2, 3), (5, 1, 8, 3)]
   cases.append((case[:3] + (windows,) + case[4:], tf))
   # Quarter turns (float32 pi/2: cos is -4.4e-8, not 0) and the same binary grids.
-  case = _fleet(rng, 0.5, 0.25, origins, [(-4.0, -4.0), (-3.5, -4.25)])
+  case = fleet(rng, 0.5, 0.25, origins, [(-4.0, -4.0), (-3.5, -4.25)])
   tf = np.zeros((B, 3), np.float32)
   tf[:, 2] = np.float32(np.pi / 2) * rng.integers(-2, 3, B)
   tf[:, :2] = np.round(rng.uniform(-1, 1, (B, 2)) * 4) / 4
   cases.append((case, tf))
   # Random transforms, decimal grids.
-  case = _fleet(rng, 0.05, 0.05, rng.uniform(-0.3, 0.3, (B, 2)), [(-0.5, -0.5), (-0.4, -0.6)])
+  case = fleet(rng, 0.05, 0.05, rng.uniform(-0.3, 0.3, (B, 2)), [(-0.5, -0.5), (-0.4, -0.6)])
   tf = np.stack([rng.uniform(-0.2, 0.2, B), rng.uniform(-0.2, 0.2, B), rng.uniform(-np.pi, np.pi, B)], 1)
   cases.append((case, tf.astype(np.float32)))
   return cases
@@ -297,10 +280,10 @@ def test_edge_fleet_really_has_undecided_cells():
   """The edge case above exercises the fallback: cells the fast arithmetic leaves open."""
   (cm, mask, *_), tf = _se2_cases()[0]
   lo = lambda a: None if a is None else a[0]          # None: the geometry is exactly float32
-  axes = ko._se2_axes_one(geometry.origin_terms(cm.origin[0], lo(cm.origin_lo)),
+  axes = keepout_reference.se2_axes_one(geometry.origin_terms(cm.origin[0], lo(cm.origin_lo)),
                           geometry.resolution_terms(cm.resolution[0], lo(cm.resolution_lo)), jnp.asarray(tf[0]), H, W)
-  px, py = ko._se2_grid(axes)
-  _, _, certain = geometry.world_to_index_checked(px, py, ko._mask_origin(mask, 0), mask.resolution[0], WM, HM)
+  px, py = keepout_reference.se2_grid(axes)
+  _, _, certain = geometry.world_to_index_checked(px, py, common.mask_origin_terms(mask, 0), mask.resolution[0], WM, HM)
   assert not bool(jnp.all(certain))
 
 
@@ -358,7 +341,7 @@ def test_other_frame_semantics_against_numpy_and_float64_reference():
     np.testing.assert_array_equal(got[b][~near], ref[~near])
 
 
-# ----------------------------------------------------------------------------- edge tables (issue 9 item 2)
+# ----------------------------------------------------------------------------- edge tables
 #
 # `geometry.edge_thresholds` / `floor_by_edges` decide each other-frame cell with float32
 # comparisons against exact per-mask thresholds; the kernels selected by `_se2_batch(impl=)`
@@ -434,7 +417,7 @@ def test_floor_by_edges_is_the_exact_floor(origin, res, k, nudge, frac):
     assert int(g) == want, (xv, int(g), want)
 
 
-_se2_impl = jax.jit(ko._se2_batch, static_argnames=("config", "loop", "impl"))
+_other_frame = jax.jit(other_frame.other_frame_batch, static_argnames=("config", "loop"))
 
 
 def _impl_inputs(case, transform, *, lower_parts=False):
@@ -446,25 +429,22 @@ def _impl_inputs(case, transform, *, lower_parts=False):
     cm = dataclasses.replace(cm, origin_lo=zeros(cm.origin_lo, (B, 2, 2)),
                              resolution_lo=zeros(cm.resolution_lo, (B, 2)))
     mask = dataclasses.replace(mask, origin_lo=zeros(mask.origin_lo, (M, 2, 2)))
-  idx, ok, _, en, win, tf = ko._batched_inputs(cm, mask, jnp.zeros((B, 3)), mask_index, enabled, window, transform,
+  idx, ok, _, en, win, tf = common.batched_inputs(cm, mask, jnp.zeros((B, 3)), mask_index, enabled, window, transform,
                                                "test")
-  return cm, mask, idx, ok, ko._fill_error(state, B), win, en, tf
+  return cm, mask, idx, ok, common.fill_error(state, B), win, en, tf
 
 
 @pytest.mark.parametrize("n", range(3))
 def test_other_frame_kernels_equal_the_exact_path(n):
-  # Centres on mask-cell edges and one ulp off (cases 0 and 1), random transforms (case 2).
-  # ("codes", the default, is run by the tests above.)
+  # Centres on mask-cell edges and one ulp off (cases 0 and 1), random transforms (case 2);
+  # both kernels: "map" (checked floors, the CPU's) and "vmap" (edge tables, four cells a word).
   case, tf = _se2_cases()[n]
   args = _impl_inputs(case, jnp.asarray(tf), lower_parts=True)
-  # Escape mode changes only the write rule: the byte one is shared with "codes", the word one not.
-  for cfg, runs in ((PLAIN, [("vmap", "fused"), ("vmap", "thresholds"), ("vmap", "thresholds_packed"),
-                             ("map", "thresholds")]),
-                    (ESCAPE, [("vmap", "thresholds"), ("vmap", "thresholds_packed")])):
-    want = ko._keepout_filter_jit(*args, config=cfg, exact=True)
-    for loop, impl in runs:
-      cost, st = _se2_impl(*args, config=cfg, loop=loop, impl=impl)
-      np.testing.assert_array_equal(np.asarray(cost), np.asarray(want[0].cost), err_msg=f"{impl} {loop} {cfg}")
+  for cfg in (PLAIN, ESCAPE):
+    want = process.filter_batch(*args, config=cfg, exact=True)
+    for loop in ("map", "vmap"):
+      cost, st = _other_frame(*args, config=cfg, loop=loop)
+      np.testing.assert_array_equal(np.asarray(cost), np.asarray(want[0].cost), err_msg=f"{loop} {cfg}")
       np.testing.assert_array_equal(np.asarray(st.last_pose_lethal), np.asarray(want[1].last_pose_lethal))
   assert (np.asarray(want[0].cost) != np.asarray(case[0].cost)).any()
 
@@ -473,16 +453,15 @@ def test_other_frame_kernels_run_the_exact_path_where_edge_tables_are_untrusted(
   # A 2**-41 m mask (below the tables' range): the robots on it must run the exact path.
   rng = np.random.default_rng(3)
   mres, res = 2.0 ** -41, 2.0 ** -42
-  case = _fleet(rng, res, mres, np.round(rng.uniform(0, 4, (B, 2))) * res, [(0.0, 0.0), (2 * mres, -mres)])
+  case = fleet(rng, res, mres, np.round(rng.uniform(0, 4, (B, 2))) * res, [(0.0, 0.0), (2 * mres, -mres)])
   tf = np.zeros((B, 3), np.float32)
   tf[:, 2] = rng.uniform(-np.pi, np.pi, B)
   tf[:, :2] = rng.uniform(2, 8, (B, 2)) * mres
   args = _impl_inputs(case, jnp.asarray(tf), lower_parts=True)
-  assert not np.asarray(ko._se2_edge_tables(args[1])[-1]).any()
-  want = np.asarray(ko._keepout_filter_jit(*args, config=PLAIN, exact=True)[0].cost)
+  assert not np.asarray(other_frame.edge_tables(args[1])[-1]).any()
+  want = np.asarray(process.filter_batch(*args, config=PLAIN, exact=True)[0].cost)
   assert (want != np.asarray(case[0].cost)).any()
-  for impl in ("thresholds", "thresholds_packed"):
-    np.testing.assert_array_equal(np.asarray(_se2_impl(*args, config=PLAIN, loop="vmap", impl=impl)[0]), want)
+  np.testing.assert_array_equal(np.asarray(_other_frame(*args, config=PLAIN, loop="vmap")[0]), want)
 
 
 def _exact_vectors(cm, mask, idx, ok, win, en):
@@ -491,41 +470,43 @@ def _exact_vectors(cm, mask, idx, ok, win, en):
   hm, wm = mask.data.shape[1:]
 
   def one(origin, origin_lo, res, res_lo, i, ok, win, en):
-    return ko._same_frame_prologue_one((h, w), geometry.origin_terms(origin, origin_lo),
-                                       geometry.resolution_terms(res, res_lo), ko._mask_origin(mask, i),
-                                       mask.resolution[i], (hm, wm), win, en, ok, exact=True)
-  (cells, _, flags, _) = jax.vmap(one)(cm.origin, cm.origin_lo, cm.resolution, cm.resolution_lo, idx, ok, win, en)
-  return cells, flags
+    o, r = geometry.origin_terms(origin, origin_lo), geometry.resolution_terms(res, res_lo)
+    mo, mr = common.mask_origin_terms(mask, i), mask.resolution[i]
+    cells = prologue.exact_axis_cells((h, w), o, r, mo, mr, (hm, wm))
+    overlap, box, _ = prologue.box_one((hm, wm), o, r, mo, mr, win, exact=True)
+    return cells, common.window_flags(w, h, *box, en & overlap & ok)
+  return jax.vmap(one)(cm.origin, cm.origin_lo, cm.resolution, cm.resolution_lo, idx, ok, win, en)
 
 
-_other_res = jax.jit(ko._other_res_batch, static_argnames=("config", "impl"))
+_other_res = jax.jit(other_resolution.other_resolution_batch, static_argnames=("config",))
 
 
 @pytest.mark.parametrize("n", [2, 3, 4])
 def test_other_resolution_kernels_equal_the_exact_path(n):
-  # Finer mask (every centre on an edge: the box kernels fall back), coarser masks (they run).
+  # A finer mask (every centre on an edge) and coarser masks: the vectorised kernel (four cells
+  # a word) and the CPU's byte gather, robot by robot.
   case = _same_frame_cases()[n]
   cm, mask, idx, ok, state, win, en, _ = _impl_inputs(case, None)
-  ((mx, vx), (my, vy)), (col_ok, row_ok, _) = _exact_vectors(cm, mask, idx, ok, win, en)
+  ((mx, vx), (my, vy)), (col_ok, row_ok) = _exact_vectors(cm, mask, idx, ok, win, en)
   cells = (cm.cost, idx, mx, vx, my, vy, col_ok, row_ok, state)
-  fits = (jax.vmap(ko._span)(mx, col_ok & vx)[1] <= W) & (jax.vmap(ko._span)(my, row_ok & vy)[1] <= H)
-  assert bool(jnp.all(fits)) == (n != 2)
-  # "rows" and "window" share their write rule; "packed" has its own (SWAR words).
-  for cfg, impls in ((PLAIN, ko._GATHER_IMPLS), (ESCAPE, ("packed", "rows"))):
-    want = np.asarray(ko._keepout_filter_jit(cm, mask, idx, ok, state, win, en, None, config=cfg, exact=True)[0].cost)
-    for impl in impls:
-      np.testing.assert_array_equal(np.asarray(_other_res(cells, mask, config=cfg, impl=impl)), want, err_msg=impl)
+  flat = mask.data.reshape(-1)
+  for cfg in (PLAIN, ESCAPE):
+    want = np.asarray(process.filter_batch(cm, mask, idx, ok, state, win, en, None, config=cfg, exact=True)[0].cost)
+    np.testing.assert_array_equal(np.asarray(_other_res(cells, mask, config=cfg)), want)
+    one = lambda c, i, mx, vx, my, vy, co, ro, st: other_resolution.gather_write_one(
+        c, flat, i, (HM, WM), mx, vx, my, vy, co, ro, st, config=cfg)
+    np.testing.assert_array_equal(np.asarray(jax.vmap(one)(*cells)), want)
   assert (want != np.asarray(cm.cost)).any()
 
 
-def test_gather_impl_reaches_the_same_frame_batch():
+def test_vectorised_same_frame_batch_gathers_other_resolutions():
   args = _impl_inputs(_same_frame_cases()[3], None)
-  want = ko._keepout_filter_jit(*args, config=ESCAPE, exact=True)
-  same_frame = jax.jit(ko._same_frame_batch, static_argnames=("config", "loop", "packed", "gather_impl"))
-  cost, st = same_frame(*args[:-1], config=ESCAPE, loop="vmap", gather_impl="packed")
+  want = process.filter_batch(*args, config=ESCAPE, exact=True)
+  same_frame_batch = jax.jit(same_frame.same_frame_batch, static_argnames=("config", "loop"))
+  cost, st = same_frame_batch(*args[:-1], config=ESCAPE, loop="vmap")
   np.testing.assert_array_equal(np.asarray(cost), np.asarray(want[0].cost))
   np.testing.assert_array_equal(np.asarray(st.last_pose_lethal), np.asarray(want[1].last_pose_lethal))
-  with pytest.raises(ValueError, match="gather_impl must be one of"):
-    same_frame(*args[:-1], config=ESCAPE, loop="vmap", gather_impl="nope")
-  with pytest.raises(ValueError, match="impl must be one of"):
-    _se2_impl(*_impl_inputs(_se2_cases()[2][0], jnp.zeros((B, 3))), config=PLAIN, loop="vmap", impl="nope")
+  with pytest.raises(ValueError, match="loop must be"):
+    same_frame_batch(*args[:-1], config=ESCAPE, loop="nope")
+  with pytest.raises(ValueError, match="loop must be"):
+    _other_frame(*_impl_inputs(_se2_cases()[2][0], jnp.zeros((B, 3))), config=PLAIN, loop="nope")

@@ -1,7 +1,7 @@
 """jaxfilters.nav2.load_params: real Nav2 bringup params, and params files written here.
 
 Expected values come from docs/nav2_semantics.md and hand-written tables; the speed, binary
-and zone results are checked against tests/reference.py (float64 loops) and,
+and zone results are checked against reference/nav2.py (float64 loops) and,
 for the warehouse masks, against the raw PGM pixels.
 """
 

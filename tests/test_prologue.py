@@ -1,6 +1,6 @@
-"""The same-frame keepout prologue on per-robot scalars (issue 9) gives the exact path's integers.
+"""The same-frame keepout prologue on per-robot scalars gives the exact path's integers.
 
-`_slice_test_one` decides whether a robot's window reads its mask cells as one slice from
+`prologue.slice_test_one` decides whether a robot's window reads its mask cells as one slice from
 the exact floors at the window's two end columns and rows (bracketed, or exact), instead
 of building and scanning the [W] / [H] index vectors. These tests check it against the
 index vectors computed with Fractions from the host doubles' float32 parts (soundness: a
@@ -26,13 +26,13 @@ import pytest
 
 from jaxfilters import geometry
 from jaxfilters import keepout as ko
-from jaxfilters import keepout_pallas as kp
-from jaxfilters.keepout_pallas import PallasTuning
-from tests import test_keepout_paths as keepout_paths
+from jaxfilters.keepout import PallasTuning, common, process, prologue, same_frame
+from jaxfilters.keepout import pallas as kp
+from benchmarks.keepout_paths import path_report
+from tests import keepout_fleets
+from tests.keepout_fleets import H, HM, M, W, WM
 
 B = 8
-# The shapes of test_keepout_paths, whose fleet builder this file uses.
-H, W, M, HM, WM = keepout_paths.H, keepout_paths.W, keepout_paths.M, keepout_paths.HM, keepout_paths.WM
 PLAIN = ko.KeepoutConfig()
 PALLAS = ko.KeepoutConfig(kernel="pallas", pallas=PallasTuning(interpret=True))
 
@@ -46,8 +46,8 @@ def _nudge(x, steps):
 
 
 def _fleet(rng, res, mres, origins, mask_origins, *, windows=None):
-  """test_keepout_paths' fleet of B robots, with zero lower parts where the geometry is exactly float32."""
-  cm, mask, state, windows, idx, enabled = keepout_paths._fleet(rng, res, mres, origins, mask_origins,
+  """`keepout_fleets.fleet` of B robots, with zero lower parts where the geometry is exactly float32."""
+  cm, mask, state, windows, idx, enabled = keepout_fleets.fleet(rng, res, mres, origins, mask_origins,
                                                                 windows=windows, b=B)
   # Zero lower parts where the geometry is exactly float32 (same sums): one pytree layout, one compile.
   z = lambda a, shape: jnp.zeros(shape, jnp.float32) if a is None else a
@@ -106,7 +106,7 @@ def _geometry(cm, mask, r, i):
   lo = lambda a: None if a is None else a[r]
   o = geometry.origin_terms(cm.origin[r], lo(cm.origin_lo))
   res = geometry.resolution_terms(cm.resolution[r], lo(cm.resolution_lo))
-  return o, res, ko._mask_origin(mask, i), mask.resolution[i]
+  return o, res, common.mask_origin_terms(mask, i), mask.resolution[i]
 
 
 def _reference_cells(o, res, mo, mres, axis, n):
@@ -120,8 +120,8 @@ def _reference_cells(o, res, mo, mres, axis, n):
 
 @jax.jit
 def _slice_tests(o, res, mo, mres, box):
-  fast = ko._slice_test_one((H, W), o, res, mo, mres, (HM, WM), box)
-  exact = ko._slice_test_one((H, W), o, res, mo, mres, (HM, WM), box, exact=True)
+  fast = prologue.slice_test_one((H, W), o, res, mo, mres, (HM, WM), box)
+  exact = prologue.slice_test_one((H, W), o, res, mo, mres, (HM, WM), box, exact=True)
   return fast, exact
 
 
@@ -177,16 +177,16 @@ def test_slice_test_agrees_with_fraction_index_vectors(name):
 @pytest.mark.parametrize("name", [c[0] for c in CASES])
 def test_filter_equals_exact_path_on_adversarial_fleets(name):
   cm, mask, state, window, mask_index, enabled = dict(CASES)[name]
-  idx, ok, _, en, win, tf = ko._batched_inputs(cm, mask, jnp.zeros((B, 3)), mask_index, enabled, window, None, "t")
-  state = ko._fill_error(state, B)
+  idx, ok, _, en, win, tf = common.batched_inputs(cm, mask, jnp.zeros((B, 3)), mask_index, enabled, window, None, "t")
+  state = common.fill_error(state, B)
   # Each batch loop and kernel once (one compile each: every fleet has one pytree layout). The
   # prologue does not depend on escape mode, which tests/test_fast_paths.py covers.
-  runs = [(PLAIN, dict(loop="map")), (PLAIN, dict(loop="vmap", packed=True)), (PALLAS, dict(loop="vmap"))]
+  runs = [(PLAIN, dict(loop="map")), (PLAIN, dict(loop="vmap")), (PALLAS, dict(loop="vmap"))]
   want = {}
   for cfg, kw in runs:
     exact_cfg = PLAIN
     if exact_cfg not in want:
-      want[exact_cfg] = ko._keepout_filter_jit(cm, mask, idx, ok, state, win, en, tf, config=exact_cfg, exact=True)
+      want[exact_cfg] = process.filter_batch(cm, mask, idx, ok, state, win, en, tf, config=exact_cfg, exact=True)
     want_cm, want_st = want[exact_cfg]
     got, st = _same_frame(cm, mask, idx, ok, state, win, en, config=cfg, **kw)
     np.testing.assert_array_equal(np.asarray(got), np.asarray(want_cm.cost), err_msg=f"{name} {cfg} {kw}")
@@ -195,13 +195,13 @@ def test_filter_equals_exact_path_on_adversarial_fleets(name):
   assert (np.asarray(want_cm.cost) != np.asarray(cm.cost)).any() or name in ("huge",)
 
 
-_same_frame = jax.jit(ko._same_frame_batch, static_argnames=("config", "loop", "packed"))
+_same_frame = jax.jit(same_frame.same_frame_batch, static_argnames=("config", "loop"))
 
 
 def test_edge_fleet_needs_the_exact_prologue():
   """The edge fleet exercises the exact branches: brackets left open at the window ends."""
   cm, mask, *_ = dict(CASES)["edges"]
-  report = ko._path_report(cm, mask, mask_index=dict(CASES)["edges"][4])
+  report = path_report(cm, mask, mask_index=dict(CASES)["edges"][4])
   assert report["exact_slice_test"] > 0 and report["sliced"] > 0, report
 
 
@@ -230,9 +230,9 @@ def _entry_ops(hlo: str, op: str) -> int:
 def test_aligned_path_runs_no_loop_unless_some_robot_needs_the_exact_arithmetic():
   """Every loop of the compiled vmap path sits in a conditional branch (none at the top level)."""
   cm, mask, state, window, mask_index, enabled = dict(CASES)["double_0.05"]
-  idx, ok, _, en, win, _ = ko._batched_inputs(cm, mask, jnp.zeros((B, 3)), mask_index, enabled, window, None, "t")
+  idx, ok, _, en, win, _ = common.batched_inputs(cm, mask, jnp.zeros((B, 3)), mask_index, enabled, window, None, "t")
   for cfg in (PLAIN, PALLAS):
-    hlo = _same_frame.lower(cm, mask, idx, ok, ko._fill_error(state, B), win, en, config=cfg,
+    hlo = _same_frame.lower(cm, mask, idx, ok, common.fill_error(state, B), win, en, config=cfg,
                             loop="vmap").compile().as_text()
     assert _entry_ops(hlo, "while") == 0
     assert _entry_ops(hlo, "conditional") >= 3          # window rerun, slice-test rerun, slice or gather

@@ -1,10 +1,10 @@
-"""A Pallas (Triton) kernel for the aligned same-frame keepout write (issue 9 item 3).
+"""A Pallas (Triton) kernel for the aligned same-frame keepout write (`KeepoutConfig.kernel`).
 
-The aligned path of `keepout.keepout_filter` reads each robot's mask cells as one
-[H, W] window of the masks' (cost + 1) table (`keepout.mask_cost_plus_one_table`,
+The aligned path of `keepout_filter` reads each robot's mask cells as one
+[H, W] window of the masks' (cost + 1) table (`mask_cost_plus_one_table`,
 padded by H rows and W columns of 0 = unknown) at a start (sx, sy), and applies
 Nav2's rule `mask != 255 and (mask > old or old == 255)`, which on (x + 1) bytes
-is `m1 > c1` (see `keepout._aligned_one`). XLA runs it as one fused loop; this
+is `m1 > c1` (see `same_frame.aligned_one`). XLA runs it as one fused loop; this
 module runs it as one Triton kernel over the fleet: each costmap byte is read and
 written once (or, with `PallasTuning(in_place=True)`, updated in place where the
 caller donates the costmap), and the mask window is read from the table, a few
@@ -28,7 +28,7 @@ no mask byte and keep their value: written back unchanged by default; with
 `in_place` not touched at all where a whole row (rows layout) or robot (both)
 lies outside. The result is the same integers as the XLA aligned path
 (tests/test_keepout_pallas.py runs the kernel in the Pallas interpreter against
-it and against a float64 reference; benchmarks/pallas_probe.py checks it on a GPU).
+it and against a float64 reference).
 
 Pallas's Triton backend computes addresses in 32-bit signed arithmetic for an
 array below 4 GiB, so a costmap batch of 2 GiB or more is run in chunks of robots
@@ -39,7 +39,6 @@ more is refused.
 from __future__ import annotations
 
 import dataclasses
-import math
 
 import jax
 import jax.numpy as jnp
@@ -61,8 +60,7 @@ class PallasTuning:
   Attributes:
     layout: "flat" (whole rows as one contiguous run, 16-byte vectors when the
       row run is a multiple of 16 bytes) or "rows" (a [R, next_pow2(W)] block, the
-      default: on an H100 at B = 16384, 200x200, "rows" 665 and "flat" 423-467
-      Gcell/s end to end, benchmarks/pallas_probe.py, 2026-11-22).
+      default, the faster of the two on the GPUs measured).
     block_cells: cells per program, a power of two in [16, 65536]: "flat" takes
       max(1, block_cells // W) rows, "rows" max(1, block_cells // next_pow2(W)).
     num_warps: warps per program (1, 2, 4, 8, 16 or 32).
@@ -149,7 +147,7 @@ def slice_params(idx, sx, sy, col_ok, row_ok, take, lethal) -> jax.Array:
   Args:
     idx: int32 [B] mask index. sx, sy: int32 [B] window start in the table.
     col_ok: bool [B, W], row_ok: bool [B, H]: the half-open update window as
-      flags (`keepout._window_flags`: each a contiguous run; row_ok all False
+      flags (`common.window_flags`: each a contiguous run; row_ok all False
       for a robot that does not run).
     take: bool [B], robots the kernel writes (others keep their cost).
     lethal: bool [B], `state.is_pose_lethal` (used in escape mode only).
@@ -278,7 +276,7 @@ def block_shape(h: int, w: int, tuning: PallasTuning) -> tuple[int, int, int]:
 def aligned_write(cost, table, params, *, escape: bool, lethal_cost: int, tuning: PallasTuning) -> jax.Array:
   """The aligned keepout write for a fleet in one Pallas kernel: new cost uint8 [B, H, W].
 
-  Same integers as `jax.vmap(keepout._aligned_one)` on the robots with a
+  Same integers as `jax.vmap(same_frame.aligned_one)` on the robots with a
   non-empty window in `params`; the others keep their cost. With
   `tuning.in_place` the result aliases `cost` (in place when the caller
   donates it under `jit`, else XLA copies it first); otherwise it is a new
@@ -287,7 +285,7 @@ def aligned_write(cost, table, params, *, escape: bool, lethal_cost: int, tuning
   Args:
     cost: uint8 [B, H, W] costmaps.
     table: uint8 [M, Hm + 2H, Wm + 2W] the masks' (cost + 1) bytes padded with 0
-      (`keepout.mask_cost_plus_one_table`); a robot's window starts at (sx, sy),
+      (`common.cost_plus_one_table`); a robot's window starts at (sx, sy),
       0 <= sx <= Wm + W, 0 <= sy <= Hm + H.
     params: int32 [B, 8] from `slice_params`.
     escape: static, Nav2's override_lethal_cost (write `lethal_cost` where the
@@ -344,14 +342,3 @@ def aligned_write(cost, table, params, *, escape: bool, lethal_cost: int, tuning
       name=f"keepout_aligned_{tuning.layout}",
   )
   return call(params, operand, table).reshape(b, h, w)
-
-
-def cells_per_program(h: int, w: int, tuning: PallasTuning) -> dict:
-  """The block geometry a tuning gives on H x W (for the probe's report)."""
-  rows, span, nblk = block_shape(h, w, tuning)
-  lanes = span * (rows if tuning.layout == "rows" else 1)
-  # The widest aligned costmap access: programs start every rows * W bytes (flat) or
-  # rows start every W bytes (rows), robots every H * W bytes; Triton loads <= 16 bytes.
-  step = rows * w if tuning.layout == "flat" else w
-  return dict(rows_per_program=rows, lanes_per_program=lanes, programs_per_robot=nblk,
-              lane_use=round(min(rows, h) * w / lanes, 4), aligned_bytes=math.gcd(16, step, h * w))

@@ -1,0 +1,135 @@
+"""`keepout_filter`: Nav2's KeepoutFilter::process over a fleet (docs/nav2_semantics.md §4.3-§4.4).
+
+For each visited master cell the mask is sampled at the cell centre and the cost
+raised (`data > old or old == 255`), skipping unknown mask cells; in escape mode the
+written value is `lethal_override_cost`. `filter_batch` picks the path: the same-frame
+fast path (same_frame.py, other_resolution.py), the other-frame fast path
+(other_frame.py), or the exact per-cell path (reference.py) for masks too large for
+the fast paths' float32 index arithmetic. Every path gives the exact path's integers.
+
+`keepout_filter` is jitted at the edge: an eager call compiles once per shape and
+config, and inside a caller's `jit` it inlines. A robot whose traced `mask_index` is
+outside [0, M) is left untouched and gets `KeepoutState.error` True (an eager call
+raises instead).
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import functools
+
+import jax
+
+from jaxfilters.keepout import pallas
+from jaxfilters.keepout.common import batched_inputs, fill_error
+from jaxfilters.keepout.config import KeepoutConfig, KeepoutState
+from jaxfilters.keepout.other_frame import other_frame_batch
+from jaxfilters.keepout.reference import general_batch
+from jaxfilters.keepout.same_frame import same_frame_batch
+from jaxfilters.types import Costmap, FilterMask
+
+
+def keepout_filter(costmap: Costmap, mask: FilterMask, poses, state: KeepoutState, *,
+                   mask_index=None, enabled=None, window=None, transform=None,
+                   config: KeepoutConfig = KeepoutConfig()) -> tuple[Costmap, KeepoutState]:
+  """Nav2 KeepoutFilter::process over a fleet (docs/nav2_semantics.md §4.3-§4.4).
+
+  Jitted at the edge (config static); inside a caller's `jit` it inlines.
+
+  Args:
+    costmap: Costmap with cost uint8 [B, H, W] (the combined map after layers).
+    mask: FilterMask with M masks (M = 1 shared, or a stack with mask_index).
+    poses: float [B, 3] robot (x, y, yaw) in the costmap frame (used by the
+      escape mode through the state, which `keepout_update_bounds` sets).
+    state: KeepoutState [B].
+    mask_index: optional int [B], which mask each robot uses. Concrete values
+      outside [0, M) raise; traced ones leave that robot's costmap and state
+      untouched and set `state.error` (never another mask).
+    enabled: optional bool [B] or scalar (Nav2 `enabled` / toggle_filter); a
+      disabled robot's costmap and state pass through unchanged.
+    window: optional int [B, 4] or [4] (min_i, min_j, max_i, max_j) half-open
+      update window, clipped to the map; default the whole map.
+    transform: optional float [B, 3] or [3] T_mask_from_global (x, y, yaw)
+      when the mask frame differs from the costmap frame; None = same frame.
+    config: static KeepoutConfig.
+
+  Returns:
+    (Costmap with the new cost, new KeepoutState).
+
+  Raises:
+    TypeError / ValueError: inputs of the wrong type, dtype or shape (e.g. a
+      Costmap whose cost is not uint8), or a concrete mask_index out of range.
+    ValueError: `config.kernel="pallas"` on a backend other than GPU without
+      `PallasTuning(interpret=True)`.
+  """
+  if not isinstance(config, KeepoutConfig):
+    raise TypeError(f"config must be a KeepoutConfig; got {type(config).__name__}")
+  pallas.use_pallas(config.kernel, config.pallas)   # kernel="pallas" off GPU raises here
+  idx, idx_ok, poses, enabled, window, transform = batched_inputs(
+      costmap, mask, poses, mask_index, enabled, window, transform, "keepout_filter")
+  del poses
+  _check_index_range(costmap, mask)
+  state = fill_error(state, costmap.num_robots)
+  return filter_batch(costmap, mask, idx, idx_ok, state, window, enabled, transform,
+                      config=_process_config(config))
+
+
+def _check_index_range(costmap: Costmap, mask: FilterMask) -> None:
+  """The kernels address the mask stack, padded by a costmap on each side, with int32 flat indices.
+
+  Raises:
+    ValueError: M (Hm + 2H) (Wm + 2W) >= 2^31, where an index would wrap and read
+      another cell (a static problem: the shapes alone decide it).
+  """
+  m, hm, wm = (int(n) for n in mask.data.shape)
+  h, w = (int(n) for n in costmap.cost.shape[1:])
+  cells = m * (hm + 2 * h) * (wm + 2 * w)
+  if cells >= 2 ** 31:
+    raise ValueError(f"keepout_filter: the mask stack [M, Hm, Wm] = [{m}, {hm}, {wm}] padded by the costmap "
+                     f"[{h}, {w}] on each side has {cells} cells; the keepout kernels index it with int32 and "
+                     f"take fewer than 2^31 (split the stack or crop the masks)")
+
+
+def _process_config(config: KeepoutConfig) -> KeepoutConfig:
+  """The options process() uses: the robot-in-zone test lives in updateBounds, so fleets with
+  different footprints share one compiled filter."""
+  if config.robot_in_zone == "center":
+    return config
+  # replace() keeps every other option (a new one included) as the caller set it.
+  return dataclasses.replace(config, robot_in_zone="center", footprint=None, robot_radius=None,
+                             min_mask_resolution=None, escape_clearance=0.0)
+
+
+@functools.partial(jax.jit, static_argnames=("config", "exact", "loop"))
+def filter_batch(costmap, mask, idx, idx_ok, state, window, enabled, transform, *, config,
+                 exact=False, loop="auto"):
+  """The batch behind `keepout_filter`, on inputs `common.batched_inputs` checked.
+
+  Args:
+    costmap, mask: as keepout_filter. idx int32 [B], idx_ok bool [B]: each robot's mask
+      and whether it is in range. state: KeepoutState [B] with `error`. window int32
+      [B, 4], enabled bool [B], transform float32 [B, 3] or None.
+    config: static KeepoutConfig.
+    exact: static; run only the exact per-cell path (the reference the tests compare
+      the fast paths with).
+    loop: static; which kernels the fast paths run: "map" (robot by robot, the CPU
+      backend's), "vmap" (vectorised over the fleet, the other backends'), or "auto"
+      (the default backend's).
+
+  Returns:
+    (Costmap with the new cost, new KeepoutState).
+  """
+  with jax.named_scope("keepout_filter"):
+    if loop == "auto":
+      loop = "map" if jax.default_backend() == "cpu" else "vmap"
+    hm, wm = mask.data.shape[1:]
+    if exact or (transform is not None and (max(hm, wm) > 2 ** 17 or hm * wm >= 2 ** 24)):
+      cost, new_state = general_batch(costmap, mask, idx, idx_ok, state, window, enabled, transform,
+                                      config=config)
+    elif transform is None:
+      cost, new_state = same_frame_batch(costmap, mask, idx, idx_ok, state, window, enabled, config=config,
+                                         loop=loop)
+    else:
+      cost, new_state = other_frame_batch(costmap, mask, idx, idx_ok, state, window, enabled, transform,
+                                          config=config, loop=loop)
+    return dataclasses.replace(costmap, cost=cost), new_state
