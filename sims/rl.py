@@ -70,7 +70,11 @@ import jax.numpy as jnp
 import mujoco
 import numpy as np
 from ml_collections import config_dict
-from mujoco import mjx
+
+from sims.quiet_mjx import expected_warp_lines
+
+with expected_warp_lines():
+  from mujoco import mjx
 
 try:
   from mujoco_playground._src import mjx_env
