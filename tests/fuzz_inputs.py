@@ -62,6 +62,7 @@ from PIL import Image
 
 from jaxfilters.grid import OccupancyGrid
 from jaxfilters.map_io import load_map, load_map_image
+from tests import fuzz_poses
 
 OK_OUTCOMES = ("loaded", "ValueError", "FileNotFoundError")
 MAX_MESSAGE = 1000
@@ -521,6 +522,7 @@ TARGETS: dict[str, Target] = {
     "png": Target(run_image, lambda: [Seed(d, _image_expected(d)) for d in png_seeds()], png_edit),
     "bmp": Target(run_image, lambda: [Seed(d, _image_expected(d)) for d in bmp_seeds()], bmp_edit),
     "jaus": Target(run_jaus, lambda: [Seed(d) for d in jaus_seeds()]),
+    "poses": Target(lambda d: fuzz_poses.run(d, workdir()), lambda: [Seed(d) for d in fuzz_poses.seeds()], fuzz_poses.edit),
 }
 
 

@@ -31,8 +31,8 @@ def _files(tmp_path: Path) -> dict:
   big = tmp_path / "big_field.csv"
   big.write_text("x,y\n1," + "1" * 140_000 + "\n")
   huge = tmp_path / "huge.csv"
-  with open(huge, "wb") as f:            # sparse: over the 32 MiB cap without writing 33 MiB
-    f.truncate(33 * 2 ** 20)
+  with open(huge, "wb") as f:            # sparse: over the 4 MiB cap without writing 5 MiB
+    f.truncate(5 * 2 ** 20)
   binary = tmp_path / "binary.csv"
   binary.write_bytes(b"\x00\xff\xfe1,2\n")
   nul = tmp_path / "nul.csv"
@@ -50,7 +50,7 @@ MATRIX = [
     ("query --keepout {keepout} --poses {big_field}", 2, "big_field.csv line 2: not CSV (field larger"),
     ("query --keepout {keepout} --poses {dev_zero}", 2, "--poses /dev/zero: not a regular file"),
     ("query --keepout {keepout} --poses {dir}", 2, "not a regular file"),
-    ("query --keepout {keepout} --poses {huge}", 2, "at most 33554432 are read"),
+    ("query --keepout {keepout} --poses {huge}", 2, "at most 4194304 are read"),
     ("query --keepout {keepout} --poses {binary}", 2, "not UTF-8 text"),
     ("query --keepout {keepout} --poses {nul}", 2, "nul.csv line 1: '2\\x00' is not a number"),
     # query: speed info

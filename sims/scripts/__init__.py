@@ -13,4 +13,5 @@ Run as `python -m sims.scripts.NAME`:
 * `make_default_scenario`: regenerates the built-in warehouse in sims/assets.
 * `soft_tuning`: a speed-zone limit tuned with jax.grad, re-checked with the real filters.
 * `sharding`: one process of a multi-process sharded rollout.
+* `readme_picture`: copies the `make demo` picture to docs/demo.png (`make readme-picture`).
 """
