@@ -102,9 +102,8 @@ def run_soak(*, num_worlds: int = 16, robots_per_world: int = 4, chunk_steps: in
       log(f"chunk {c + 1}/{num_chunks}: {(c + 1) * chunk_steps * num_worlds} world-steps, nan {nan}, "
           f"keepout entries {entries}, worst zone excess {worst:+.4f} m/s, {kind} {mem}")
   seconds = time.perf_counter() - t0
-  # bytes_in_use oscillates as the allocator reuses blocks (seen on an H100: 43.7-55.1 MB over
-  # 10 chunks, back to 43.7 MB at chunk 7), so "flat" means no upward trend: after the
-  # warm-up chunk, the later half's peak does not exceed the earlier half's peak.
+  # bytes_in_use oscillates as the allocator reuses blocks, so "flat" means no upward trend:
+  # after the warm-up chunk, the later half's peak does not exceed the earlier half's peak.
   steady = memory[1:]
   if len(steady) >= 2:
     half = len(steady) // 2
