@@ -38,7 +38,7 @@ from flax import struct
 from gymnax.environments import spaces
 import rejax
 
-from sims.rl import NavEnv, NavEnvConfig
+from sims.rl import NavEnv
 
 _F32 = jnp.float32
 

@@ -439,20 +439,3 @@ def _keepout_pass(f: dict) -> bool:
   if f.get("footprint_entries") is None:
     return f["keepout_entries"] == 0 and f["keepout_steps"] == 0
   return bool(f["keepout_ok"])
-
-
-def main(argv=None) -> int:
-  """Kept for `python -m sims.cli`: the same as the `jaxfilters` console script.
-
-  Args:
-    argv: command-line arguments without the program name (default sys.argv[1:]).
-
-  Returns:
-    The exit code (see jaxfilters/cli.py).
-  """
-  from jaxfilters.cli import main as cli_main
-  return cli_main(argv)
-
-
-if __name__ == "__main__":
-  sys.exit(main())
