@@ -1,27 +1,39 @@
-# `make demo` and `make test` each build .venv on first use (pinned by constraints.txt)
-# and reuse it afterwards; the stamp is redone when pyproject.toml or constraints.txt change.
+# `make demo` builds .venv with the base dependencies only (what the fleet demo needs);
+# `make test` adds the test extras (pytest, hypothesis, notebooks, ROS bags, RL). Both are pinned
+# by constraints.txt, built on first use and reused; a stamp is redone when pyproject.toml or
+# constraints.txt change. Python >= 3.11 (PYTHON=python3.12 make demo picks another one).
 PYTHON ?= python3
 VENV := .venv
 PY := $(VENV)/bin/python
-STAMP := $(VENV)/.installed
+BASE_STAMP := $(VENV)/.installed-base
+TEST_STAMP := $(VENV)/.installed-test
 
-.PHONY: demo test bench venv clean
+.PHONY: demo test bench venv readme-picture clean
 
-venv: $(STAMP)
+venv: $(BASE_STAMP)
 
-$(STAMP): pyproject.toml constraints.txt
+$(BASE_STAMP): pyproject.toml constraints.txt
 	$(PYTHON) -m venv $(VENV)
 	$(PY) -m pip install -q --upgrade pip
-	$(PY) -m pip install -q -c constraints.txt -e '.[test]'
-	touch $(STAMP)
+	$(PY) -m pip install -q -c constraints.txt -e .
+	touch $(BASE_STAMP)
 
-demo: $(STAMP)
+$(TEST_STAMP): $(BASE_STAMP)
+	$(PY) -m pip install -q -c constraints.txt -e '.[test]'
+	touch $(TEST_STAMP)
+
+demo: $(BASE_STAMP)
 	$(VENV)/bin/jaxfilters fleet --out out/demo
 
-test: $(STAMP)
+# The README's picture is the demo's: run the demo, then copy its trajectories.png with the
+# numbers it shows (sims/scripts/readme_picture.py); commit docs/demo.png afterwards.
+readme-picture: demo
+	$(PY) -m sims.scripts.readme_picture out/demo docs/demo.png
+
+test: $(TEST_STAMP)
 	$(PY) -m pytest -q tests
 
-bench: $(STAMP)
+bench: $(TEST_STAMP)
 	$(PY) -m benchmarks
 
 clean:

@@ -11,7 +11,7 @@ Figures (each with `compile_s` apart from the steady state, the device named):
   100 Hz and the observation).
 * `policy_loop`: the same with a 2 x 64 tanh MLP (rejax's PPO actor, random
   weights) choosing every action from the observation.
-* `ppo_train`: rejax PPO (`sims.train_ppo.make_ppo`) training calls of N envs
+* `ppo_train`: rejax PPO (`sims.ppo.make_ppo`) training calls of N envs
   x 64 steps; agent env-steps/s including the PPO updates.
 * `weak_scaling` / `strong_scaling`: `env_only` sharded over 1, 2, 4, ... of
   the available devices (`sims.sharding`): N per device fixed, or N total
@@ -120,7 +120,7 @@ def bench_env(env, n, steps, repeats, *, policy=False, mesh=None) -> dict:
 
 
 def bench_ppo(env, n, num_steps, calls) -> dict:
-  from sims.train_ppo import GymnaxAdapter, make_ppo
+  from sims.ppo import GymnaxAdapter, make_ppo
   adapter = GymnaxAdapter(env, episode_length=200)
   algo = make_ppo(adapter, timesteps_per_call=n * num_steps, num_envs=n, num_steps=num_steps,
                   num_minibatches=4 if n * num_steps >= 64 else 1)

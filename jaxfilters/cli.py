@@ -6,7 +6,7 @@
 Commands come from two places: the library's own (`query`, `jaus`, listed in
 `_BUILTIN`) and any installed package that registers a function under the
 entry-point group `jaxfilters.commands` (the simulator registers `fleet` and
-`bench` from `sims.cli`; the library never imports the simulator). Each
+`bench` from `sims/scripts`; the library never imports the simulator). Each
 registered function receives argparse's subparsers object, adds its parser
 and sets `func` (a callable `args -> int`) as a default; a command that passes
 unknown options through to another program also sets `passthrough` to the name
@@ -124,34 +124,37 @@ def main(argv=None) -> int:
     return EXIT_INTERNAL
 
 
-# --------------------------------------------------------------------------- query
+# --------------------------------------------------------------------------- options shared by commands
 
-_QUERY_EPILOG = """\
-examples:
-  jaxfilters query --params nav2_params.yaml \\
-      --mask keepout_filter_mask_server=warehouse_keepout.yaml \\
-      --mask speed_filter_mask_server=warehouse_speed.yaml \\
-      --set KEEPOUT_ZONE_ENABLED=True --set SPEED_ZONE_ENABLED=True --poses poses.csv
-  jaxfilters query --speed warehouse_speed.yaml --speed-base 100 --speed-multiplier -1 --poses poses.csv
+# The speed mask's CostmapFilterInfo when a command is given a mask file instead of a params file:
+# the values Nav2's bringup and system tests give their speed masks (docs/nav2_semantics.md §8.5),
+# limit = 100 - d percent. `query --speed` and `fleet --speed` both use them.
+SPEED_TYPE_DEFAULT = 1
+SPEED_BASE_DEFAULT = 100.0
+SPEED_MULTIPLIER_DEFAULT = -1.0
 
-Each pose is a fresh robot's first filter cycle, as Nav2's filters run it: an unknown cell, a cell off
-the mask and a computed limit of 0 all give speed_limit null (no limit). A filter that is absent or
-disabled gives null. Poses are rounded to float32 like every pose in jaxfilters. Write a value that
-starts with '-' as --transform=-1,2,0.
-exit codes: 0 ok, 2 bad option or input file, 1 internal error"""
+# Pose files are read whole: a regular file of at most this many bytes (about 250,000 poses),
+# which parses in seconds and a few hundred MB.
+MAX_POSES_BYTES = 4 * 2 ** 20
+
+EXIT_CODES_EPILOG = ("exit codes: 0 ok, 1 internal error (a bug; JAXFILTERS_DEBUG=1 shows the traceback), "
+                     "2 bad option or input file (one line on stderr, nothing run)")
 
 
-def register_query(sub) -> None:
-  """Adds `jaxfilters query`: what the costmap filters say at given poses, as JSON lines."""
-  p = sub.add_parser(
-      "query", help="speed limit, keepout cost, binary state and zone at poses (JSON lines)",
-      description="Prints one JSON object per pose, in order, with keys x, y, speed_limit (a number, or\n"
-      "null for no limit), speed_limit_type (percent / absolute), keepout_cost (0..255, the cost of the\n"
-      "keepout mask under the pose; 255 off the mask or on an unknown cell), binary_state and zone.",
-      epilog=_QUERY_EPILOG, formatter_class=argparse.RawDescriptionHelpFormatter)
-  p.add_argument("--poses", required=True, metavar="F.csv",
-                 help="rows x,y or x,y,yaw in the costmap's global frame (m, rad); a header line is allowed")
-  g = p.add_argument_group("filters from a Nav2 params file")
+def add_params_options(parser, *, transform: bool = False):
+  """Adds --params, --costmap, --mask and --set (and --transform) as an option group.
+
+  `query` and `fleet` read a Nav2 params file through these options and
+  `params_costmap`, so both accept the same spelling.
+
+  Args:
+    parser: an argparse parser.
+    transform: also add --transform X,Y,YAW (masks in another frame than the costmap).
+
+  Returns:
+    The argument group (for more options).
+  """
+  g = parser.add_argument_group("filters from a Nav2 params file")
   g.add_argument("--params", metavar="P.yaml", help="a nav2_params.yaml")
   g.add_argument("--costmap", choices=("global_costmap", "local_costmap"),
                  help="which costmap's filters (default global_costmap)")
@@ -159,26 +162,33 @@ def register_query(sub) -> None:
                  help="the map YAML a filter mask server serves (its yaml_filename); repeatable")
   g.add_argument("--set", action="append", default=[], dest="substitutions", metavar="PLACEHOLDER=VALUE",
                  help="resolve a launch placeholder such as KEEPOUT_ZONE_ENABLED=True; repeatable")
-  g.add_argument("--transform", metavar="X,Y,YAW",
-                 help="pose of the costmap's global_frame in the masks' frame (Nav2 takes it from TF), "
-                 "needed when they differ, e.g. local_costmap in odom with masks in map")
-  m = p.add_argument_group("filters from mask files (instead of --params), with Nav2's default parameters")
-  m.add_argument("--keepout", metavar="M.yaml", help="keepout mask (type 0)")
-  m.add_argument("--speed", metavar="M.yaml", help="speed mask")
-  m.add_argument("--speed-type", metavar="1|2", help="1 percent (default), 2 m/s")
-  m.add_argument("--speed-base", metavar="B", help="limit = value * multiplier + base (default 0.0)")
-  m.add_argument("--speed-multiplier", metavar="K", help="(default 1.0)")
-  m.add_argument("--binary", metavar="M.yaml", help="binary mask (type 3, flip_threshold 50, default_state false)")
-  m.add_argument("--zone", metavar="M.yaml", help="zone mask (type 4; every id 1..127 is a zone)")
-  p.set_defaults(func=run_query)
+  if transform:
+    g.add_argument("--transform", metavar="X,Y,YAW",
+                   help="pose of the costmap's global_frame in the masks' frame (Nav2 takes it from TF), "
+                   "needed when they differ, e.g. local_costmap in odom with masks in map")
+  return g
 
 
-def _query_number(option: str, text: str) -> float:
+def add_speed_options(group) -> None:
+  """Adds --speed-type, --speed-base and --speed-multiplier (the speed mask's CostmapFilterInfo).
+
+  They apply to a mask given with --speed; `speed_info` reads them with the
+  shared defaults (type 1, base 100, multiplier -1).
+  """
+  group.add_argument("--speed-type", metavar="1|2",
+                     help=f"1 percent, 2 m/s (default {SPEED_TYPE_DEFAULT})")
+  group.add_argument("--speed-base", metavar="B",
+                     help=f"limit = mask value * multiplier + base (default {SPEED_BASE_DEFAULT:g})")
+  group.add_argument("--speed-multiplier", metavar="K", help=f"(default {SPEED_MULTIPLIER_DEFAULT:g})")
+
+
+def number_option(option: str, text: str) -> float:
+  """A number option's value, usable as float32 on the device, or CliError naming the option."""
   from jaxfilters import validate
   try:
     value = float(text)
   except ValueError:
-    raise CliError(f"{option} must be a number; got {text!r}") from None
+    raise CliError(f"{option} must be a number; got {validate.short_repr(text)}") from None
   try:
     validate.float32_values(value, option)
   except ValueError as e:
@@ -186,7 +196,36 @@ def _query_number(option: str, text: str) -> float:
   return value
 
 
-def _query_pairs(option: str, items: list[str]) -> dict[str, str]:
+def given_speed_options(args) -> list[str]:
+  """The speed options given on the command line, by name."""
+  return [o for o, v in (("--speed-type", args.speed_type), ("--speed-base", args.speed_base),
+                         ("--speed-multiplier", args.speed_multiplier)) if v is not None]
+
+
+def speed_info(args) -> tuple[int, float, float]:
+  """(type, base, multiplier) of --speed-type/--speed-base/--speed-multiplier with the shared defaults.
+
+  Raises:
+    CliError: a type other than 1 or 2, a value that is not a float32 number, or a
+      base and multiplier whose limit d * multiplier + base overflows float32 for
+      some mask value d (FilterInfo.create's check).
+  """
+  from jaxfilters.types import FilterInfo
+  ftype = SPEED_TYPE_DEFAULT if args.speed_type is None else str(args.speed_type).strip()
+  if ftype not in (1, "1", "2"):
+    raise CliError(f"--speed-type must be 1 (percent) or 2 (m/s); got {args.speed_type!r}")
+  base = SPEED_BASE_DEFAULT if args.speed_base is None else number_option("--speed-base", args.speed_base)
+  mult = (SPEED_MULTIPLIER_DEFAULT if args.speed_multiplier is None
+          else number_option("--speed-multiplier", args.speed_multiplier))
+  try:
+    FilterInfo.create(int(ftype), base, mult)
+  except ValueError as e:
+    raise CliError(f"--speed-base/--speed-multiplier: {str(e).splitlines()[0]}") from None
+  return int(ftype), base, mult
+
+
+def name_value_pairs(option: str, items: list[str]) -> dict[str, str]:
+  """NAME=VALUE items of a repeatable option -> dict, or CliError (empty part, a name twice)."""
   out = {}
   for item in items:
     key, sep, value = item.partition("=")
@@ -198,23 +237,117 @@ def _query_pairs(option: str, items: list[str]) -> dict[str, str]:
   return out
 
 
-def _query_poses(path: str):
-  """Reads F.csv -> (poses float32 [B, 3], line numbers, echoed (x, y))."""
+def check_params_options(args) -> None:
+  """Without --params, refuses --costmap, --mask, --set (and --transform): they would be ignored."""
+  if args.params is not None:
+    return
+  for option, value in (("--costmap", args.costmap), ("--mask", args.mask), ("--set", args.substitutions),
+                        ("--transform", getattr(args, "transform", None))):
+    if value:
+      raise CliError(f"{option} needs --params")
+
+
+def params_costmap(args, command: str):
+  """The Nav2Costmap that --params/--costmap/--mask/--set name; warnings go to stderr as one line each.
+
+  Args:
+    args: the namespace of a parser that `add_params_options` filled.
+    command: the command's name, for the warning lines.
+
+  Returns:
+    `jaxfilters.Nav2Costmap` of the chosen costmap (at least one filter).
+
+  Raises:
+    CliError: a bad pair, a params file that does not load, or no filters.
+  """
+  import warnings
+
+  from jaxfilters import nav2
+  name = args.costmap or "global_costmap"
+  masks = name_value_pairs("--mask", args.mask)
+  subs = name_value_pairs("--set", args.substitutions)
+  with warnings.catch_warnings(record=True) as caught:
+    warnings.simplefilter("always", nav2.Nav2ParamsWarning)
+    try:
+      params = nav2.load_params(args.params, masks=masks, substitutions=subs, costmaps=(name,))
+    except (ValueError, FileNotFoundError) as e:
+      raise CliError(str(e).splitlines()[0] if str(e) else type(e).__name__) from None
+  for w in caught:
+    print(f"jaxfilters {command}: warning: {str(w.message).splitlines()[0]}", file=sys.stderr)
+  costmap = params.costmap(name)
+  if not costmap.filters:
+    raise CliError(f"--params {args.params}: {name} has no costmap filters (its 'filters:' list is empty)")
+  return costmap
+
+
+def read_text_file(path: str, option: str, *, max_bytes: int) -> str:
+  """The UTF-8 text of a regular file of at most `max_bytes`, or CliError naming `option` and the file.
+
+  The file is opened without blocking and checked with fstat before anything
+  is read, so a FIFO, a device (/dev/zero) or a directory is refused at once.
+  """
+  import stat
+  try:
+    fd = os.open(path, os.O_RDONLY | getattr(os, "O_NONBLOCK", 0))
+  except FileNotFoundError:
+    raise CliError(f"{option} {path}: file does not exist") from None
+  except (OSError, ValueError) as e:
+    raise CliError(f"{option} {path}: cannot read it ({getattr(e, 'strerror', None) or e})") from None
+  try:
+    st = os.fstat(fd)
+    if not stat.S_ISREG(st.st_mode):
+      raise CliError(f"{option} {path}: not a regular file (a FIFO, device or directory is refused)")
+    if st.st_size > max_bytes:
+      raise CliError(f"{option} {path}: {st.st_size} bytes; at most {max_bytes} are read")
+    chunks, size = [], 0
+    while size <= max_bytes:
+      chunk = os.read(fd, min(1 << 20, max_bytes + 1 - size))
+      if not chunk:
+        break
+      chunks.append(chunk)
+      size += len(chunk)
+  except OSError as e:
+    raise CliError(f"{option} {path}: cannot read it ({e.strerror or e})") from None
+  finally:
+    os.close(fd)
+  if size > max_bytes:
+    raise CliError(f"{option} {path}: more than {max_bytes} bytes; at most {max_bytes} are read")
+  try:
+    return b"".join(chunks).decode("utf-8")
+  except UnicodeDecodeError as e:
+    raise CliError(f"{option} {path}: not UTF-8 text (byte {e.start})") from None
+
+
+def read_poses(path: str, *, max_bytes: int = MAX_POSES_BYTES):
+  """Reads a pose file: CSV rows x,y or x,y,yaw (m, rad), an optional header line, blank lines skipped.
+
+  Args:
+    path: the file (a regular file of at most `max_bytes`, UTF-8).
+    max_bytes: the size cap.
+
+  Returns:
+    (poses float32 [B, 3] (yaw 0 where absent), line numbers [B], echoed (x, y) as parsed floats).
+
+  Raises:
+    CliError: the only error, one line naming the file and the line (the CLI's exit 2):
+      not a regular file, too large, not UTF-8, not CSV, a wrong column count, a field
+      that is not a number or not finite in float32, or no poses.
+  """
   import csv
 
   import numpy as np
 
   from jaxfilters import validate
-  try:
-    with open(path, newline="", encoding="utf-8") as f:
-      text = f.read()
-  except FileNotFoundError:
-    raise CliError(f"--poses {path}: file does not exist") from None
-  except (OSError, UnicodeDecodeError) as e:
-    raise CliError(f"--poses {path}: cannot read it ({type(e).__name__}: {e})") from None
+  text = read_text_file(path, "--poses", max_bytes=max_bytes)
   poses, lines, echo = [], [], []
   reader = csv.reader(text.splitlines())
-  for fields in reader:
+  while True:
+    try:
+      fields = next(reader)
+    except StopIteration:
+      break
+    except csv.Error as e:
+      raise CliError(f"{path} line {reader.line_num}: not CSV ({e})") from None
     line = reader.line_num
     fields = [v.strip() for v in fields]
     if not any(fields):
@@ -233,34 +366,73 @@ def _query_poses(path: str):
     if None in numbers:
       bad = fields[numbers.index(None)]
       raise CliError(f"{path} line {line}: {validate.short_repr(bad)} is not a number")
-    try:
-      validate.float32_values(numbers, "x,y,yaw", owner=f"{path} line {line}")
-    except ValueError as e:
-      raise CliError(str(e)) from None
     poses.append(numbers + [0.0] * (3 - len(numbers)))
     lines.append(line)
     echo.append((numbers[0], numbers[1]))
   if not poses:
     raise CliError(f"--poses {path}: no poses (expected rows x,y or x,y,yaw)")
-  return np.asarray(poses, np.float32), lines, echo
-
-
-def _query_costmap_from_params(args, nav2):
-  import warnings
-  name = args.costmap or "global_costmap"
-  masks = _query_pairs("--mask", args.mask)
-  subs = _query_pairs("--set", args.substitutions)
-  with warnings.catch_warnings(record=True) as caught:
-    warnings.simplefilter("always", nav2.Nav2ParamsWarning)
+  values = np.asarray(poses, np.float64)
+  # One vectorised check; the first row it refuses is checked again alone for validate's message.
+  with np.errstate(over="ignore", invalid="ignore"):
+    f32 = values.astype(np.float32)
+  bad = ~np.isfinite(f32) | ((f32 != 0) & (np.abs(f32) < validate.F32_TINY))
+  for i in np.flatnonzero(bad.any(axis=1))[:1]:
     try:
-      params = nav2.load_params(args.params, masks=masks, substitutions=subs, costmaps=(name,))
-    except (ValueError, FileNotFoundError) as e:
-      raise CliError(str(e).splitlines()[0]) from None
-  for w in caught:
-    print(f"jaxfilters query: warning: {str(w.message).splitlines()[0]}", file=sys.stderr)
-  costmap = params.costmap(name)
-  if not costmap.filters:
-    raise CliError(f"--params {args.params}: {name} has no costmap filters (its 'filters:' list is empty)")
+      validate.float32_values(values[i, :len(poses[i])], "x,y,yaw", owner=f"{path} line {lines[i]}")
+    except ValueError as e:
+      raise CliError(str(e)) from None
+  return f32, lines, echo
+
+
+# --------------------------------------------------------------------------- query
+
+_QUERY_EPILOG = f"""\
+examples:
+  jaxfilters query --params nav2_params.yaml \\
+      --mask keepout_filter_mask_server=warehouse_keepout.yaml \\
+      --mask speed_filter_mask_server=warehouse_speed.yaml \\
+      --set KEEPOUT_ZONE_ENABLED=True --set SPEED_ZONE_ENABLED=True --poses poses.csv
+  jaxfilters query --params sims/assets/nav2_params.yaml --poses poses.csv
+  jaxfilters query --speed warehouse_speed.yaml --speed-base 0 --speed-multiplier 1 --poses poses.csv
+
+poses.csv holds rows x,y or x,y,yaw (a header line is allowed), e.g.
+  x,y,yaw
+  1.5,-2.0,0.0
+
+Each pose is a fresh robot's first filter cycle, as Nav2's filters run it: an unknown cell, a cell off
+the mask and a computed limit of 0 all give speed_limit null (no limit). A filter that is absent or
+disabled gives null. Poses are rounded to float32 like every pose in jaxfilters. The pose file must be a
+regular UTF-8 file of at most {MAX_POSES_BYTES >> 20} MiB. A speed mask given with --speed uses type
+{SPEED_TYPE_DEFAULT}, base {SPEED_BASE_DEFAULT:g} and multiplier {SPEED_MULTIPLIER_DEFAULT:g} unless told
+(the values Nav2's bringup gives its speed masks; `jaxfilters fleet --speed` uses the same). Write a value
+that starts with '-' as --transform=-1,2,0.
+
+{EXIT_CODES_EPILOG}"""
+
+
+def register_query(sub) -> None:
+  """Adds `jaxfilters query`: what the costmap filters say at given poses, as JSON lines."""
+  p = sub.add_parser(
+      "query", help="speed limit, keepout cost, binary state and zone at poses (JSON lines)",
+      description="Prints one JSON object per pose, in order, with keys x, y, speed_limit (a number, or\n"
+      "null for no limit), speed_limit_type (percent / absolute), keepout_cost (0..255, the cost of the\n"
+      "keepout mask under the pose; 255 off the mask or on an unknown cell), binary_state and zone.",
+      epilog=_QUERY_EPILOG, formatter_class=argparse.RawDescriptionHelpFormatter)
+  p.add_argument("--poses", required=True, metavar="F.csv",
+                 help="rows x,y or x,y,yaw in the costmap's global frame (m, rad); a header line is allowed")
+  add_params_options(p, transform=True)
+  m = p.add_argument_group("filters from mask files (instead of --params), with Nav2's default parameters")
+  m.add_argument("--keepout", metavar="M.yaml", help="keepout mask (type 0)")
+  m.add_argument("--speed", metavar="M.yaml", help="speed mask")
+  add_speed_options(m)
+  m.add_argument("--binary", metavar="M.yaml", help="binary mask (type 3, flip_threshold 50, default_state false)")
+  m.add_argument("--zone", metavar="M.yaml", help="zone mask (type 4; every id 1..127 is a zone)")
+  p.set_defaults(func=run_query)
+
+
+def _query_costmap_from_params(args):
+  costmap = params_costmap(args, "query")
+  name = costmap.name
   for f in costmap.filters:
     if not f.enabled:
       print(f"jaxfilters query: warning: {name} filter '{f.name}' is disabled (enabled: false); "
@@ -268,8 +440,8 @@ def _query_costmap_from_params(args, nav2):
   return costmap
 
 
-def _query_costmap_from_masks(args, nav2):
-  from jaxfilters import validate
+def _query_costmap_from_masks(args):
+  from jaxfilters import nav2, validate
   from jaxfilters.map_io import load_map
   from jaxfilters.types import FilterInfo, FilterMask
 
@@ -278,20 +450,15 @@ def _query_costmap_from_masks(args, nav2):
       grid = load_map(path)
       validate.resolution_value(grid.resolution, owner=f"{option} {path}")
       validate.float32_values(grid.origin[:2], "origin", owner=f"{option} {path}")
+      return FilterMask.create(grid, info)
     except (ValueError, FileNotFoundError) as e:
       raise CliError(f"{option}: {str(e).splitlines()[0]}") from None
-    return FilterMask.create(grid, info)
 
   masks = {}
   if args.keepout:
     masks["keepout"] = mask("--keepout", args.keepout, FilterInfo.create(0))
   if args.speed:
-    ftype = 1 if args.speed_type is None else args.speed_type.strip()
-    if ftype not in (1, "1", "2"):
-      raise CliError(f"--speed-type must be 1 (percent) or 2 (m/s); got {args.speed_type!r}")
-    base = 0.0 if args.speed_base is None else _query_number("--speed-base", args.speed_base)
-    mult = 1.0 if args.speed_multiplier is None else _query_number("--speed-multiplier", args.speed_multiplier)
-    masks["speed"] = mask("--speed", args.speed, FilterInfo.create(int(ftype), base, mult))
+    masks["speed"] = mask("--speed", args.speed, FilterInfo.create(*speed_info(args)))
   if args.binary:
     masks["binary"] = mask("--binary", args.binary, FilterInfo.create(3))
   if args.zone:
@@ -318,31 +485,26 @@ def run_query(args) -> int:
   import numpy as np
 
   direct = [o for o in ("keepout", "speed", "binary", "zone") if getattr(args, o)]
-  speed_opts = [o for o, v in (("--speed-type", args.speed_type), ("--speed-base", args.speed_base),
-                               ("--speed-multiplier", args.speed_multiplier)) if v is not None]
   if args.params is not None and direct:
     raise CliError(f"--{direct[0]} cannot be combined with --params (the params file names the masks; "
                    "give a mask server's file with --mask NODE=MAP.yaml)")
-  if args.params is None:
-    if not direct:
-      raise CliError("give --params P.yaml, or mask files with --keepout/--speed/--binary/--zone")
-    for option, value in (("--costmap", args.costmap), ("--mask", args.mask), ("--set", args.substitutions),
-                          ("--transform", args.transform)):
-      if value:
-        raise CliError(f"{option} needs --params")
+  if args.params is None and not direct:
+    raise CliError("give --params P.yaml, or mask files with --keepout/--speed/--binary/--zone")
+  check_params_options(args)
+  speed_opts = given_speed_options(args)
   if speed_opts and not args.speed:
     raise CliError(f"{speed_opts[0]} needs --speed M.yaml")
+  if args.speed:
+    speed_info(args)                     # bad values are refused before any file is read
   transform = None
   if args.transform is not None:
     parts = args.transform.split(",")
     if len(parts) != 3:
       raise CliError(f"--transform must be X,Y,YAW (3 numbers); got {args.transform!r}")
-    transform = [_query_number("--transform", v) for v in parts]
-  poses, lines, echo = _query_poses(args.poses)
+    transform = [number_option("--transform", v) for v in parts]
+  poses, lines, echo = read_poses(args.poses)
 
-  from jaxfilters import nav2
-  costmap = (_query_costmap_from_params(args, nav2) if args.params is not None
-             else _query_costmap_from_masks(args, nav2))
+  costmap = _query_costmap_from_params(args) if args.params is not None else _query_costmap_from_masks(args)
   foreign = costmap.foreign_frames()
   if foreign and transform is None:
     raise CliError(f"--costmap {costmap.name}: its global_frame is {costmap.global_frame!r} but masks are in "
@@ -385,6 +547,7 @@ def run_query(args) -> int:
       row[key] = cols[key][i] if key in cols else None
     rows.append(json.dumps(row))
   sys.stdout.write("\n".join(rows) + "\n")
+  return EXIT_OK
 
 
 if __name__ == "__main__":

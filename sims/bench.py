@@ -23,7 +23,11 @@ import time
 import jax
 import jax.numpy as jnp
 import numpy as np
-from mujoco import mjx
+
+from sims.quiet_mjx import expected_warp_lines
+
+with expected_warp_lines():
+  from mujoco import mjx
 
 from sims.config import FleetConfig
 from sims.env import FleetEnv, load_robot_model, mjx_step

@@ -1,4 +1,4 @@
-"""Frozen, hashable configuration of the MJX fleet (validated eagerly, STYLE.md habit 7).
+"""Frozen, hashable configuration of the MJX fleet, validated eagerly where it is set.
 
 Every field here is static under `jit` (it picks shapes or code paths); change
 one with `dataclasses.replace` and expect one new compile. Units are SI.
@@ -222,7 +222,7 @@ class FleetConfig:
                        f"got {self.robots_in_keepout}")
     if self.robots_in_keepout and self.keepout_escape == "off":
       raise ValueError(f"{o}.robots_in_keepout = {self.robots_in_keepout} needs keepout_escape 'center' or "
-                       "'footprint': without escape mode a robot started in a zone is deadlocked (spec §4.6)")
+                       "'footprint': without escape mode a robot started in a zone is deadlocked (docs/nav2_semantics.md §4.6)")
     if self.num_stations < 2:
       raise ValueError(f"{o}.num_stations must be >= 2; got {self.num_stations}")
     _ratio(o, "controller_hz", self.controller_hz, "costmap_hz", self.costmap_hz)

@@ -38,7 +38,11 @@ import jax
 import jax.numpy as jnp
 import mujoco
 import numpy as np
-from mujoco import mjx
+
+from sims.quiet_mjx import expected_warp_lines
+
+with expected_warp_lines():
+  from mujoco import mjx
 
 from jaxfilters.footprint import window_cells
 from jaxfilters.keepout import KeepoutState
@@ -186,10 +190,10 @@ class FleetEnv:
       raise ValueError("FleetConfig.impl='warp' needs a CUDA GPU and warp-lang "
                        "(pip install 'mujoco-mjx[warp]'); use impl='jax' on CPU")
     if config.impl == "warp":
-      from mujoco.mjx import warp as mjx_warp  # noqa: PLC0415 - its import messages: sims/__init__.py
+      from mujoco.mjx import warp as mjx_warp  # noqa: PLC0415 - imported (quietly) with mujoco.mjx above
       if not mjx_warp.WARP_INSTALLED:
-        import sims  # noqa: PLC0415
-        said = "; ".join(sims.MJX_WARP_MESSAGES) or "warp not importable"
+        from sims import quiet_mjx  # noqa: PLC0415
+        said = "; ".join(quiet_mjx.WARP_MESSAGES) or "warp not importable"
         raise ValueError(f"FleetConfig.impl='warp' needs warp-lang, which mujoco.mjx could not import "
                          f"({said}); pip install 'jaxfilters[warp]'")
     world = build_world(scenario or Scenario.default(), config, seed=seed)

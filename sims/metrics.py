@@ -122,7 +122,7 @@ def zone_at(speed_mask: FilterMask, zone_table: jax.Array, xy: jax.Array) -> jax
 
 
 def in_keepout(keepout_mask: FilterMask, xy: jax.Array) -> jax.Array:
-  """Whether the point's keepout-mask cell is lethal (Nav2's "pose in keepout", spec §4.2).
+  """Whether the point's keepout-mask cell is lethal (Nav2's "pose in keepout", docs/nav2_semantics.md §4.2).
 
   Args:
     keepout_mask: FilterMask (M = 1) of the keepout filter.

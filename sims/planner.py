@@ -19,7 +19,7 @@ within the acceleration limits (a unicycle, `rollout_dt` steps over
 Speed compliance at zone entry: every rollout interval [p_t, p_t+1] must have
 max(|v_t|, |v_t+1|) <= the speed-mask limit at its ends and midpoint
 (`jaxfilters.speed.speed_limit_at_one`'s limit per mask cell, dilated by one
-cell; like Nav2's SpeedFilter path lookahead, spec §5.6, applied to the
+cell; like Nav2's SpeedFilter path lookahead, docs/nav2_semantics.md §5.6, applied to the
 candidate's own path), and the first interval also respects the limit in
 force. The excess is integrated and penalised above every other term, so the
 robot brakes *before* a slower zone. Surviving candidates are scored by

@@ -45,7 +45,7 @@ then drawn), - `keepout_penalty` per keepout entry, - `collision_penalty`,
 speed the filter had to clip, - `approach_penalty` x (m/s x s) of command above
 the limit 0.25-0.5 m ahead, - `time_penalty` per step.
 
-Value problems never raise under `jit` (STYLE.md habit 5): a velocity action
+Value problems never raise under `jit` (a traced value cannot be tested in Python): a velocity action
 outside [-1, 1] is clipped and a non-finite one zeroed, and both are counted in
 `metrics["bad_action"]`; a navigation action outside [-1, S) keeps the robot's
 goal and is counted there too. Static problems (shape, dtype) raise
@@ -70,7 +70,11 @@ import jax.numpy as jnp
 import mujoco
 import numpy as np
 from ml_collections import config_dict
-from mujoco import mjx
+
+from sims.quiet_mjx import expected_warp_lines
+
+with expected_warp_lines():
+  from mujoco import mjx
 
 try:
   from mujoco_playground._src import mjx_env

@@ -90,7 +90,7 @@ class Scenario:
 
 
 def speed_limit_host(d: int, speed_type: int, base: float, multiplier: float) -> tuple[float, bool]:
-  """Nav2 getSpeedLimitAtPose for one raw mask value, in float64 (spec §5.3).
+  """Nav2 getSpeedLimitAtPose for one raw mask value, in float64 (docs/nav2_semantics.md §5.3).
 
   Base and multiplier are rounded to float32 first, as CostmapFilterInfo carries them.
 

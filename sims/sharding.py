@@ -27,7 +27,7 @@ one machine with two processes of two CPU devices each:
 
     # process i of 2 (i = 0, 1), e.g. two shells:
     XLA_FLAGS=--xla_force_host_platform_device_count=2 JAX_PLATFORMS=cpu \\
-      python -m sims.sharding --coordinator 127.0.0.1:12355 --num-processes 2 \\
+      python -m sims.scripts.sharding --coordinator 127.0.0.1:12355 --num-processes 2 \\
         --process-id i --worlds 8 --steps 5 --out out/dist_i.npz
 
 `distributed_rollout` (what that runs) calls `jax.distributed.initialize(
@@ -40,8 +40,6 @@ runs with one process per host (coordinator = host 0's address).
 
 from __future__ import annotations
 
-import argparse
-import sys
 from collections.abc import Sequence
 
 import jax
@@ -203,29 +201,3 @@ def distributed_rollout(coordinator: str, num_processes: int, process_id: int, *
     out[name] = (uniq, allvals.take(first, axis=world_axis))
   jax.distributed.shutdown()
   return out
-
-
-def main(argv=None) -> int:
-  """`python -m sims.sharding`: one process of a multi-process sharded rollout."""
-  ap = argparse.ArgumentParser(prog="python -m sims.sharding",
-                               description="One process of a multi-process (jax.distributed) sharded fleet rollout.")
-  ap.add_argument("--coordinator", required=True, help="host:port of process 0 (e.g. 127.0.0.1:12355)")
-  ap.add_argument("--num-processes", type=int, required=True)
-  ap.add_argument("--process-id", type=int, required=True)
-  ap.add_argument("--worlds", type=int, default=8)
-  ap.add_argument("--steps", type=int, default=5)
-  ap.add_argument("--robots-per-world", type=int, default=2)
-  ap.add_argument("--seed", type=int, default=0)
-  ap.add_argument("--out", required=True, help="npz file for this process's shards")
-  args = ap.parse_args(argv)
-  if not 0 <= args.process_id < args.num_processes:
-    ap.error(f"--process-id must lie in [0, {args.num_processes}); got {args.process_id}")
-  out = distributed_rollout(args.coordinator, args.num_processes, args.process_id, num_worlds=args.worlds,
-                            num_steps=args.steps, robots_per_world=args.robots_per_world, seed=args.seed)
-  np.savez(args.out, **{f"{k}_index": v[0] for k, v in out.items()}, **{k: v[1] for k, v in out.items()})
-  print(f"process {args.process_id}: saved {sorted(out)} for worlds {out['goal'][0].tolist()}")
-  return 0
-
-
-if __name__ == "__main__":
-  sys.exit(main())

@@ -43,15 +43,14 @@ the rasterised mask: the margin holds when no footprint overlaps a keepout
 cell.
 
 `tune` returns the optimisation history (objective, limit, gradient per
-iteration) for a notebook; `python -m sims.soft_tuning [figure.png]` prints a
-run (and draws it with `plot_tuning`).
+iteration) for a notebook; `python -m sims.scripts.soft_tuning [figure.png]`
+prints a run (and draws it with `plot_tuning`).
 """
 
 from __future__ import annotations
 
 import dataclasses
 import functools
-import sys
 
 import jax
 import jax.numpy as jnp
@@ -584,25 +583,3 @@ def plot_tuning(scenario: CornerScenario, history: History, checks: dict, path) 
   fig.tight_layout()
   fig.savefig(path, dpi=110)
   plt.close(fig)
-
-
-def main() -> None:
-  scenario = CornerScenario()
-  hist = tune(scenario)
-  best = hist.best_limit
-  print(f"{scenario.num_robots} robots, {scenario.duration:.1f} s, route {scenario.route_length:.1f} m")
-  for k in range(len(hist.limit)):
-    print(f"  iter {k:2d}: limit {hist.limit[k]:.3f} m/s  objective {hist.objective[k]:7.3f}  "
-          f"progress {hist.progress[k]:6.3f} m  exposure {hist.exposure[k]:.4f}  grad {hist.gradient[k]:+.3f}")
-  checks = {}
-  for name, lim in (("start", hist.limit[0]), ("tuned", best), ("top speed", scenario.robot.max_speed)):
-    chk = checks[name] = hard_check(scenario, lim)
-    print(f"hard re-run, {name}: d = {chk.mask_value} ({chk.hard_limit:.2f} m/s): progress {chk.progress:.3f} m, "
-          f"clearance {chk.clearance:+.3f} m, cells entered {chk.cells_entered}, margin held {chk.margin_held}")
-  if len(sys.argv) > 1:
-    plot_tuning(scenario, hist, checks, sys.argv[1])
-    print(f"figure: {sys.argv[1]}")
-
-
-if __name__ == "__main__":
-  main()

@@ -62,7 +62,7 @@ from PIL import Image
 
 from jaxfilters.grid import OccupancyGrid
 from jaxfilters.map_io import load_map, load_map_image
-from tests import fuzz_jaus, fuzz_params
+from tests import fuzz_jaus, fuzz_params, fuzz_poses
 
 OK_OUTCOMES = ("loaded", "ValueError", "FileNotFoundError")
 MAX_MESSAGE = 1000
@@ -507,6 +507,8 @@ TARGETS: dict[str, Target] = {
     "jaus": Target(fuzz_jaus.run_bytes, fuzz_jaus.seeds, fuzz_jaus.edit),
     "jaus-file": Target(fuzz_jaus.run_file, fuzz_jaus.file_seeds, fuzz_jaus.edit),
     "params": Target(fuzz_params.run, fuzz_params.seeds, fuzz_params.edit),
+    "poses": Target(lambda d: fuzz_poses.run(d, workdir()), lambda: [Seed(d) for d in fuzz_poses.seeds()],
+                    fuzz_poses.edit),
 }
 
 

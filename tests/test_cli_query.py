@@ -78,7 +78,7 @@ def test_done_when_check_warehouse_speed_limits(nav2_maps, tmp_path, capsys):
     assert (row["x"], row["y"]) == (x, y)
     assert row["speed_limit"] == (None if d in (0, 100) else 100.0 - d)
     assert row["speed_limit_type"] == "percent"
-    # Trinary 0.65/0.1 keepout (spec §10.2): pixel <= 89 occupied (254), >= 230 free (0), else unknown.
+    # Trinary 0.65/0.1 keepout (docs/nav2_semantics.md §10.2): pixel <= 89 occupied (254), >= 230 free (0), else unknown.
     mx, my = int((x + 15.1) // 0.03), int((y + 25.0) // 0.03)
     g = int(keep[my, mx])
     assert row["keepout_cost"] == (254 if g <= 89 else 0 if g >= 230 else 255)
@@ -154,7 +154,8 @@ def test_mask_files_mode_against_reference(tmp_path, capsys):
     assert row["zone"] == (d if d is not None and d > 0 else 0)
   assert [r["keepout_cost"] for r in rows[:4]] == [0, 64, 191, 255]   # round half away: 25 -> 64, 75 -> 191
   assert [r["speed_limit"] for r in rows[:8]] == [None, 75.0, 25.0, None, None, 50.0, None, 70.0]
-  rc, rows, _ = _query(capsys, "--speed", m, "--speed-type", "2", "--speed-multiplier", "0.01", "--poses", poses)
+  rc, rows, _ = _query(capsys, "--speed", m, "--speed-type", "2", "--speed-base", "0", "--speed-multiplier", "0.01",
+                         "--poses", poses)
   assert rows[1]["speed_limit_type"] == "absolute" and rows[1]["speed_limit"] == 0.25
   assert rows[0]["keepout_cost"] is None and rows[0]["speed_limit"] is None
 

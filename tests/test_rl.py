@@ -18,7 +18,7 @@ import pytest
 from mujoco_playground._src import mjx_env, wrapper
 
 from jaxfilters import constants
-from sims import soak
+from sims.scripts import soak
 from sims.config import FleetConfig
 from sims.rl import NavEnv, NavEnvConfig, clip_command, randomize_zones_and_goals
 
@@ -271,7 +271,7 @@ def test_brax_wrappers_with_zone_and_goal_randomisation():
 
 
 def test_ppo_iterations_train_the_policy():
-  from sims.train_ppo import GymnaxAdapter, evaluate_policy, make_ppo, mean_policy
+  from sims.ppo import GymnaxAdapter, evaluate_policy, make_ppo, mean_policy
   env = NavEnv.create()
   adapter = GymnaxAdapter(env, episode_length=6)
   algo = make_ppo(adapter, timesteps_per_call=3 * 4 * 8, num_envs=4, num_steps=8, num_epochs=2,

@@ -173,7 +173,7 @@ def test_two_processes_jax_distributed(single, tmp_path):
   port = _free_port()
   procs = []
   for i in range(2):
-    cmd = [sys.executable, "-m", "sims.sharding", "--coordinator", f"127.0.0.1:{port}", "--num-processes", "2",
+    cmd = [sys.executable, "-m", "sims.scripts.sharding", "--coordinator", f"127.0.0.1:{port}", "--num-processes", "2",
            "--process-id", str(i), "--worlds", str(WORLDS), "--steps", str(STEPS), "--robots-per-world", str(K),
            "--out", str(tmp_path / f"p{i}.npz")]
     procs.append(subprocess.Popen(cmd, env=_env(2), cwd=ROOT, stdout=subprocess.PIPE, stderr=subprocess.PIPE,

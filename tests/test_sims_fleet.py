@@ -26,7 +26,7 @@ import numpy as np
 import pytest
 from PIL import Image
 
-from sims import cli
+from jaxfilters import cli
 from sims.config import FleetConfig
 from sims.env import FleetEnv
 from sims.scenario import Scenario

@@ -171,7 +171,7 @@ def test_nav2_centre_test_traps_where_the_footprint_test_releases(escape_run):
     (["--keepout-escape", "sideways"], ["invalid choice: 'sideways'"]),
 ])
 def test_fleet_escape_options_are_usage_errors(argv, words, capsys, tmp_path):
-  from sims import cli
+  from jaxfilters import cli
   rc = cli.main(["fleet", "--out", str(tmp_path / "o"), "--steps", "1", *argv])
   err = capsys.readouterr().err
   assert rc == 2 and all(w in err for w in words), err

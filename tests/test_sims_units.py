@@ -346,7 +346,7 @@ def test_summarize_flags_violations():
 
 
 def test_default_scenario_files_are_small_and_reproducible(tmp_path):
-  from sims import make_default_scenario
+  from sims.scripts import make_default_scenario
   shipped = Path(make_default_scenario.ASSETS)
   total = sum((shipped / f"default_{n}.{e}").stat().st_size for n in ("map", "keepout", "speed")
               for e in ("yaml", "pgm"))

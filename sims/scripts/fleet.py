@@ -1,28 +1,28 @@
-"""`jaxfilters` command line: `jaxfilters fleet` (MJX fleet demo) and `jaxfilters bench`.
+"""`jaxfilters fleet`: simulate a robot fleet in MJX with Nav2's speed and keepout filters.
 
     jaxfilters fleet --out out/demo                       # built-in warehouse, 16 robots, 120 s
-    jaxfilters fleet --map ../shared/maps/nav2/warehouse.yaml \\
-        --keepout ../shared/maps/nav2/warehouse_keepout.yaml \\
-        --speed ../shared/maps/nav2/warehouse_speed.yaml --robots 12 --seconds 90
-    jaxfilters fleet --keepout-escape footprint --robots-in-keepout 4 --seconds 30   # issue #6505
-    jaxfilters bench [benchmark options]                  # benchmarks/run.py
+    jaxfilters fleet --map warehouse.yaml --keepout warehouse_keepout.yaml \\
+        --speed warehouse_speed.yaml --robots 12 --seconds 90
+    jaxfilters fleet --map warehouse.yaml --params nav2_params.yaml \\
+        --mask keepout_filter_mask_server=warehouse_keepout.yaml \\
+        --mask speed_filter_mask_server=warehouse_speed.yaml
+    jaxfilters fleet --keepout-escape footprint --robots-in-keepout 4 --seconds 30   # Nav2 #6505
 
-`fleet` writes OUT/summary.json, OUT/trajectories.png (map, zones, paths
-coloured by speed) and with --animate OUT/fleet.gif, and prints a summary
-table. It exits with status 3 if any robot entered a keepout cell or exceeded
-a speed zone's limit by more than the stated tolerance (disable with
---no-check); with --keepout-escape, also if a robot's footprint entered a zone
-from outside or a robot started in one was still in it at the end; 2 is a
-usage error (see jaxfilters/cli.py for every code).
+It writes OUT/summary.json, OUT/trajectories.png (map, zones, paths coloured
+by speed) and with --animate OUT/fleet.gif, and prints a summary table. Every
+option is checked before anything is simulated (exit 2, one line); the exit
+code is 3 if any robot entered a keepout cell or exceeded a speed zone's
+limit by more than the stated tolerance (disable with --no-check); with
+--keepout-escape, also if a robot's footprint entered a zone from outside or a
+robot started in one was still in it at the end (every code: jaxfilters/cli.py).
 
-These commands are registered into the library's CLI (`jaxfilters.cli`)
-through the `jaxfilters.commands` entry-point group (pyproject.toml).
+Registered into the library's CLI through the `jaxfilters.commands`
+entry-point group (pyproject.toml).
 """
 
 from __future__ import annotations
 
 import argparse
-import importlib.util
 import json
 import math
 import os
@@ -30,7 +30,8 @@ import sys
 import time
 from pathlib import Path
 
-from jaxfilters.cli import EXIT_INTERNAL, EXIT_OK, EXIT_VIOLATION, CliError
+from jaxfilters import cli as jcli
+from jaxfilters.cli import EXIT_OK, EXIT_VIOLATION, CliError
 
 
 class _Progress:
@@ -54,6 +55,33 @@ class _Progress:
     sys.stderr.flush()
 
 
+_FLEET_EPILOG = f"""\
+examples:
+  jaxfilters fleet --out out/demo                          # built-in warehouse, 16 robots, 120 s
+  jaxfilters fleet --robots 64 --seconds 60 --animate --out out/run
+  jaxfilters fleet --map warehouse.yaml --keepout warehouse_keepout.yaml --speed warehouse_speed.yaml \\
+      --speed-base 100 --speed-multiplier -1 --out out/mine
+  jaxfilters fleet --map warehouse.yaml --params nav2_params.yaml \\
+      --mask keepout_filter_mask_server=warehouse_keepout.yaml \\
+      --mask speed_filter_mask_server=warehouse_speed.yaml \\
+      --set KEEPOUT_ZONE_ENABLED=True --set SPEED_ZONE_ENABLED=True --out out/params
+  jaxfilters fleet --keepout-escape footprint --robots-in-keepout 4 --seconds 30
+
+Maps, one of three sets (no option is ignored: a mix is refused):
+  none of --map/--keepout/--speed/--params   the built-in warehouse (its speed zones are fixed)
+  --map, --keepout and --speed               speed mask type {jcli.SPEED_TYPE_DEFAULT}, base {jcli.SPEED_BASE_DEFAULT:g}, multiplier {jcli.SPEED_MULTIPLIER_DEFAULT:g} unless
+                                             --speed-type/--speed-base/--speed-multiplier say otherwise
+                                             (the defaults of `jaxfilters query --speed`)
+  --map and --params                         the costmap's keepout and speed filters (both enabled),
+                                             with their type, base and multiplier
+--seconds is rounded to whole env steps of 0.2 s (a note says so when it moves); the last chunk
+is shorter when --chunk-seconds does not divide the run.
+
+exit codes: 0 ok, 1 internal error (a bug; JAXFILTERS_DEBUG=1 shows the traceback), 2 bad option or
+input file (one line on stderr, checked before anything is simulated), 3 a robot broke a rule
+(a keepout entry or a speed violation; --no-check exits 0 anyway)"""
+
+
 def register_fleet(sub) -> argparse.ArgumentParser:
   """Adds `jaxfilters fleet` to the library CLI's subparsers.
 
@@ -65,34 +93,35 @@ def register_fleet(sub) -> argparse.ArgumentParser:
   """
   p = sub.add_parser("fleet", help="simulate a robot fleet in MJX with speed and keepout filters",
                      description="Simulate a fleet of differential-drive robots in MJX. Every velocity "
-                     "command is clipped by the Nav2 speed filter and keepout zones are never entered.")
+                     "command is clipped by the Nav2 speed filter and keepout zones are never entered.",
+                     epilog=_FLEET_EPILOG, formatter_class=argparse.RawDescriptionHelpFormatter)
   p.add_argument("--robots", type=int, default=16, help="total robots (default 16)")
   p.add_argument("--robots-per-world", type=int, default=None,
                  help="robots sharing one warehouse (default: all of them up to 64, else the "
                  "largest divisor of --robots up to 16); worlds are independent and batched")
   g = p.add_mutually_exclusive_group()
-  g.add_argument("--seconds", type=float, default=None, help="simulated seconds (default 120)")
+  g.add_argument("--seconds", type=float, default=None,
+                 help="simulated seconds, rounded to whole env steps of 0.2 s (default 120)")
   g.add_argument("--steps", type=int, default=None, help="env steps of 1/costmap_hz (0.2 s) each")
-  p.add_argument("--map", type=Path, default=None, help="Nav2 map YAML (default: built-in warehouse)")
-  p.add_argument("--keepout", type=Path, default=None, help="keepout mask YAML (Nav2 type 0)")
-  p.add_argument("--speed", type=Path, default=None, help="speed mask YAML")
-  p.add_argument("--speed-type", type=int, default=1, choices=(1, 2),
-                 help="speed mask type: 1 percent (default), 2 absolute m/s")
-  p.add_argument("--speed-base", type=float, default=100.0, help="speed mask base (default 100)")
-  p.add_argument("--speed-multiplier", type=float, default=-1.0, help="speed mask multiplier (default -1)")
+  m = p.add_argument_group("maps from files (default: the built-in warehouse)")
+  m.add_argument("--map", type=Path, default=None, help="Nav2 map YAML of the static map")
+  m.add_argument("--keepout", type=Path, default=None, help="keepout mask YAML (Nav2 type 0)")
+  m.add_argument("--speed", type=Path, default=None, help="speed mask YAML")
+  jcli.add_speed_options(m)
+  jcli.add_params_options(p)
   p.add_argument("--seed", type=int, default=0, help="PRNG seed (default 0)")
   p.add_argument("--out", type=Path, default=Path("out/fleet"), help="output folder (default out/fleet)")
   p.add_argument("--animate", action="store_true", help="also write fleet.gif")
   p.add_argument("--chunk-seconds", type=float, default=10.0,
                  help="simulated seconds per jitted chunk (progress granularity; default 10)")
-  p.add_argument("--record-robots", type=int, default=64, help="robots drawn in the pictures (default 64)")
+  p.add_argument("--record-robots", type=int, default=64, help="robots drawn in the pictures, >= 1 (default 64)")
   p.add_argument("--impl", choices=("jax", "warp"), default="jax", help="MJX implementation (default jax)")
   p.add_argument("--devices", default=None, metavar="N|all",
                  help="shard the worlds over N devices (or all); the world count must be a multiple "
                  "(default: one device, no sharding)")
   p.add_argument("--keepout-escape", choices=("off", "center", "footprint"), default="off",
                  help="keepout as a layer before inflation with escape mode (Nav2 override_lethal_cost): "
-                 "'center' is Nav2's centre-cell test, 'footprint' the footprint test (issue #6505); the "
+                 "'center' is Nav2's centre-cell test, 'footprint' the footprint test (Nav2 #6505); the "
                  "planner then treats an inscribed cell under the robot as a collision, as Nav2's controllers "
                  "do (default off: Nav2's filter after inflation)")
   p.add_argument("--robots-in-keepout", type=int, default=0,
@@ -120,21 +149,80 @@ def _check_fleet_args(args) -> None:
     raise CliError(f"--steps must be >= 1; got {args.steps}")
   if not 0 <= args.seed < 2 ** 32:
     raise CliError(f"--seed must lie in [0, 2**32); got {args.seed}")
-  if args.record_robots < 0:
-    raise CliError(f"--record-robots must be >= 0; got {args.record_robots}")
+  if args.record_robots < 1:
+    raise CliError(f"--record-robots must be >= 1 (the pictures draw at least one robot); got {args.record_robots}")
   if args.robots_in_keepout < 0:
     raise CliError(f"--robots-in-keepout must be >= 0; got {args.robots_in_keepout}")
   if args.robots_in_keepout and args.keepout_escape == "off":
     raise CliError("--robots-in-keepout needs --keepout-escape center or footprint (without escape mode a "
                    "robot started in a zone is deadlocked)")
-  for name in ("speed_base", "speed_multiplier"):
-    v = getattr(args, name)
-    if not math.isfinite(v):
-      raise CliError(f"--{name.replace('_', '-')} must be finite; got {v!r}")
-  for name in ("map", "keepout", "speed"):
+  _check_map_args(args)
+
+
+def _check_map_args(args) -> None:
+  """The map options form one of the three documented sets; nothing given is ignored."""
+  speed_opts = jcli.given_speed_options(args)
+  if args.params is not None:
+    given = [f"--{n}" for n in ("keepout", "speed") if getattr(args, n) is not None] + speed_opts
+    if given:
+      raise CliError(f"{given[0]} cannot be combined with --params (the params file gives the masks and the "
+                     "speed filter's type, base and multiplier; give a mask server's file with --mask NODE=MAP.yaml)")
+    if args.map is None:
+      raise CliError("--params needs --map M.yaml (the static map the robots drive on)")
+  else:
+    jcli.check_params_options(args)
+    maps = (args.map, args.keepout, args.speed)
+    if any(m is not None for m in maps) and not all(m is not None for m in maps):
+      raise CliError("give all three of --map, --keepout and --speed, or --map with --params "
+                     "(or none for the built-in warehouse)")
+    if speed_opts and args.speed is None:
+      raise CliError(f"{speed_opts[0]} needs --speed M.yaml (the built-in warehouse's speed zones are fixed)")
+    if args.speed is not None:
+      jcli.speed_info(args)
+  for name in ("map", "keepout", "speed", "params"):
     p = getattr(args, name)
     if p is not None and not Path(p).is_file():
       raise CliError(f"--{name} {p}: no such file" if not Path(p).exists() else f"--{name} {p}: not a file")
+
+
+def _scenario_from_params(args):
+  """The Scenario of --map with --params' keepout and speed filters (both present and enabled)."""
+  from sims.scenario import Scenario
+  costmap = jcli.params_costmap(args, "fleet")
+  where = f"--params {args.params}: {costmap.name}"
+  for kind, f in (("keepout", costmap.keepout), ("speed", costmap.speed)):
+    if f is None:
+      raise CliError(f"{where} has no {kind} filter; the fleet runs a keepout and a speed filter")
+    if not f.enabled:
+      raise CliError(f"{where} filter '{f.name}' is disabled (enabled: false); the fleet runs it always "
+                     "(enable it, e.g. with --set for a launch placeholder)")
+  if costmap.foreign_frames():
+    raise CliError(f"{where}: its masks are in frame {costmap.foreign_frames()[0]!r}, not the costmap's "
+                   f"{costmap.global_frame!r}; the fleet simulates one frame")
+  speed = costmap.speed
+  if speed.percentage is None:
+    raise CliError(f"{where} speed filter '{speed.name}': its info type is not 1 or 2 (a speed filter's)")
+  import numpy as np
+  info = speed.mask.info
+  base, mult = float(np.asarray(info.base).reshape(-1)[0]), float(np.asarray(info.multiplier).reshape(-1)[0])
+  return Scenario.load(args.map, costmap.keepout.mask_yaml, speed.mask_yaml,
+                       speed_type=1 if speed.percentage else 2, speed_base=base, speed_multiplier=mult)
+
+
+def _steps_and_chunks(args, step_s: float) -> tuple[int, int]:
+  """(total env steps, steps per chunk) of --seconds/--steps and --chunk-seconds; a note if --seconds moved."""
+  if args.steps is not None:
+    total = args.steps
+  else:
+    seconds = 120.0 if args.seconds is None else args.seconds
+    total = int(round(seconds / step_s))
+    if total < 1:
+      raise CliError(f"--seconds must be at least one env step ({step_s:g} s); got {seconds!r}")
+    if not math.isclose(total * step_s, seconds, rel_tol=1e-9, abs_tol=1e-9):
+      print(f"jaxfilters fleet: note: --seconds {seconds:g} is not a whole number of {step_s:g} s env steps; "
+            f"simulating {total} steps ({total * step_s:g} s)", file=sys.stderr)
+  chunk = max(1, min(total, int(round(args.chunk_seconds / step_s))))
+  return total, chunk
 
 
 def _prepare_out(out: Path) -> Path:
@@ -246,18 +334,18 @@ def run_fleet(args) -> int:
   if args.robots_in_keepout > k:
     raise CliError(f"--robots-in-keepout ({args.robots_in_keepout}) counts robots per world; it must be <= the "
                    f"robots per world ({k})")
-  maps = (args.map, args.keepout, args.speed)
-  if any(m is not None for m in maps) and not all(m is not None for m in maps):
-    raise CliError("give all three of --map, --keepout and --speed (or none for the built-in warehouse)")
   out = _prepare_out(Path(args.out))
   try:
-    if args.map is None:
+    if args.params is not None:
+      scenario = _scenario_from_params(args)
+    elif args.map is None:
       scenario = Scenario.default()
     else:
-      scenario = Scenario.load(args.map, args.keepout, args.speed, speed_type=args.speed_type,
-                               speed_base=args.speed_base, speed_multiplier=args.speed_multiplier)
+      speed_type, speed_base, speed_multiplier = jcli.speed_info(args)
+      scenario = Scenario.load(args.map, args.keepout, args.speed, speed_type=speed_type,
+                               speed_base=speed_base, speed_multiplier=speed_multiplier)
   except (FileNotFoundError, ValueError) as e:
-    raise CliError(str(e)) from None
+    raise CliError(str(e).splitlines()[0] if str(e) else type(e).__name__) from None
   escape = args.keepout_escape != "off"
   try:
     config = FleetConfig(robots_per_world=k, impl=args.impl, keepout_escape=args.keepout_escape,
@@ -268,16 +356,9 @@ def run_fleet(args) -> int:
   num_worlds = args.robots // k
   mesh = _mesh(args.devices, num_worlds)
   step_s = config.step_seconds
-  if args.steps is not None:
-    total_steps = args.steps
-  else:
-    seconds = 120.0 if args.seconds is None else args.seconds
-    total_steps = int(round(seconds / step_s))
-    if total_steps < 1:
-      raise CliError(f"--seconds must be at least one env step ({step_s:g} s); got {seconds!r}")
-  chunk = max(1, min(total_steps, int(round(args.chunk_seconds / step_s))))
-  num_chunks = -(-total_steps // chunk)
-  total_steps = num_chunks * chunk
+  total_steps, chunk = _steps_and_chunks(args, step_s)
+  # Full chunks, then one shorter chunk (compiled on its own) when `chunk` does not divide the run.
+  lengths = [chunk] * (total_steps // chunk) + ([total_steps % chunk] if total_steps % chunk else [])
 
   print(f"jaxfilters fleet: {scenario.name}, {args.robots} robots ({num_worlds} world(s) x {k}), "
         f"{total_steps * step_s:g} s simulated, device {jax.devices()[0].device_kind}", file=sys.stderr)
@@ -287,9 +368,8 @@ def run_fleet(args) -> int:
   except ValueError as e:      # the maps cannot host this fleet (mask resolution, free space)
     raise CliError(f"{scenario.name}: {e}") from None
   states = env.reset_fn(mesh=mesh)(env.params, env.world_keys(jax.random.PRNGKey(args.seed), num_worlds))
-  run = env.rollout_fn(chunk, mesh=mesh)
   t1 = time.perf_counter()
-  compiled = run.compile(env.params, states)
+  compiled = {n: env.rollout_fn(n, mesh=mesh).compile(env.params, states) for n in sorted(set(lengths))}
   compile_s = time.perf_counter() - t1
   setup_s = t1 - t0
   rec = min(args.record_robots, args.robots)
@@ -297,11 +377,13 @@ def run_fleet(args) -> int:
   t_run = time.perf_counter()
   progress = _Progress(total_steps * step_s)
   progress.update(0.0, time.perf_counter() - t_start)
-  for c in range(num_chunks):
-    states, frames = compiled(env.params, states)
-    poses.append(np.asarray(frames.pose).reshape(chunk, -1, 3)[:, :rec])
-    speeds.append(np.asarray(frames.speed).reshape(chunk, -1)[:, :rec])
-    progress.update((c + 1) * chunk * step_s, time.perf_counter() - t_start)
+  done = 0
+  for n in lengths:
+    states, frames = compiled[n](env.params, states)
+    poses.append(np.asarray(frames.pose).reshape(n, -1, 3)[:, :rec])
+    speeds.append(np.asarray(frames.speed).reshape(n, -1)[:, :rec])
+    done += n
+    progress.update(done * step_s, time.perf_counter() - t_start)
   jax.block_until_ready(states)
   run_s = time.perf_counter() - t_run
 
@@ -313,6 +395,7 @@ def run_fleet(args) -> int:
   summary["scenario"] = {
       "name": scenario.name,
       "map": str(args.map) if args.map else "built-in (sims/assets/default_map.yaml)",
+      "params": None if args.params is None else str(args.params),
       "resolution_m": scenario.map.resolution, "size_cells": list(scenario.map.data.shape[::-1]),
       "speed_filter": {"type": scenario.speed_type, "base": scenario.speed_base,
                        "multiplier": scenario.speed_multiplier},
@@ -356,78 +439,3 @@ def _keepout_pass(f: dict) -> bool:
   if f.get("footprint_entries") is None:
     return f["keepout_entries"] == 0 and f["keepout_steps"] == 0
   return bool(f["keepout_ok"])
-
-
-def harness_root() -> Path | None:
-  """The checkout holding benchmarks/run.py beside the sims package, or None (a wheel install)."""
-  import sims
-  root = Path(sims.__file__).resolve().parent.parent
-  return root if (root / "benchmarks" / "run.py").is_file() else None
-
-
-def run_bench(args) -> int:
-  """Runs benchmarks/run.py's main with the passed-through options.
-
-  The harness is not installed with the package (pyproject.toml installs only
-  jaxfilters and sims): it is found beside the sims package of a source
-  checkout (an editable install or PYTHONPATH), else a one-line usage error.
-
-  Args:
-    args: the argparse namespace; `args.bench_args` holds the options passed through.
-
-  Returns:
-    The harness's exit code, or 1 if benchmarks/run.py cannot be imported.
-
-  Raises:
-    CliError: no benchmarks/ beside the sims package and none importable.
-  """
-  argv = list(getattr(args, "bench_args", []) or [])
-  root = harness_root()
-  if root is None and importlib.util.find_spec("benchmarks") is None:
-    raise CliError("the benchmark harness (benchmarks/run.py) ships with the source checkout, not with "
-                   "the installed package; run `jaxfilters bench` from an editable install of a checkout "
-                   "(pip install -e .) or `python -m benchmarks` in one")
-  if root is not None and str(root) not in sys.path:
-    sys.path.insert(0, str(root))     # benchmarks is a checkout folder, not an installed package
-  try:
-    from benchmarks import run as bench_run
-  except ImportError as e:
-    print(f"jaxfilters bench: the benchmark harness benchmarks/run.py could not be imported ({e}); "
-          "run from a checkout that has benchmarks/run.py", file=sys.stderr)
-    return EXIT_INTERNAL
-  if not hasattr(bench_run, "main"):
-    print("jaxfilters bench: benchmarks/run.py has no main(argv)", file=sys.stderr)
-    return EXIT_INTERNAL
-  return bench_run.main(argv) or 0
-
-
-def register_bench(sub) -> argparse.ArgumentParser:
-  """Adds `jaxfilters bench` (options pass through to benchmarks/run.py).
-
-  Args:
-    sub: argparse's subparsers object.
-
-  Returns:
-    The `bench` parser (no --help of its own: `jaxfilters bench --help` shows the harness's).
-  """
-  p = sub.add_parser("bench", help="run the benchmark harness (benchmarks/run.py); options pass through",
-                     add_help=False)
-  p.set_defaults(func=run_bench, passthrough="bench_args")
-  return p
-
-
-def main(argv=None) -> int:
-  """Kept for `python -m sims.cli`: the same as the `jaxfilters` console script.
-
-  Args:
-    argv: command-line arguments without the program name (default sys.argv[1:]).
-
-  Returns:
-    The exit code (see jaxfilters/cli.py).
-  """
-  from jaxfilters.cli import main as cli_main
-  return cli_main(argv)
-
-
-if __name__ == "__main__":
-  sys.exit(main())

@@ -1,6 +1,6 @@
 """Writes the built-in warehouse scenario: sims/assets/default_{map,keepout,speed}.{yaml,pgm}.
 
-Run once (`python -m sims.make_default_scenario`); the generated files are
+Run once (`python -m sims.scripts.make_default_scenario`); the generated files are
 shipped in the repository and loaded with `jaxfilters.map_io.load_map`, exactly
 as Nav2's map_server would load them. The layout is a 30 m x 20 m warehouse at
 0.05 m cells (600 x 400 pixels, 240 kB per image):
@@ -28,7 +28,7 @@ from pathlib import Path
 
 import numpy as np
 
-ASSETS = Path(__file__).resolve().parent / "assets"
+ASSETS = Path(__file__).resolve().parents[1] / "assets"
 RESOLUTION = 0.05
 ORIGIN = (-15.0, -10.0)
 WIDTH_M, HEIGHT_M = 30.0, 20.0
@@ -36,7 +36,7 @@ WIDTH_M, HEIGHT_M = 30.0, 20.0
 # Pixel values (8-bit gray, negate 0).
 PX_OCCUPIED, PX_UNKNOWN, PX_FREE = 0, 205, 254          # trinary (map_saver's values)
 PX_NO_LIMIT = 255                                       # scale: p = 0 -> 0 -> no limit
-# Scale mode with occupied 1.0 / free 0.0: value = round(100 * (255 - px) / 255) (spec §10.2),
+# Scale mode with occupied 1.0 / free 0.0: value = round(100 * (255 - px) / 255) (docs/nav2_semantics.md §10.2),
 # and the speed limit is 100 - value percent.
 PX_PERCENT_50 = 127                                     # 100 * 128/255 = 50.20 -> 50 -> 50 %
 PX_PERCENT_30 = 76                                      # 100 * 179/255 = 70.20 -> 70 -> 30 %
@@ -145,8 +145,9 @@ def write(out_dir: Path = ASSETS) -> list[Path]:
 
 
 def main(argv=None) -> None:
-  """`python -m sims.make_default_scenario [--out DIR]`: writes the files and prints their paths."""
-  parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+  """`python -m sims.scripts.make_default_scenario [--out DIR]`: writes the files and prints their paths."""
+  parser = argparse.ArgumentParser(prog="python -m sims.scripts.make_default_scenario",
+                                   description=__doc__.splitlines()[0])
   parser.add_argument("--out", type=Path, default=ASSETS, help="output folder (default sims/assets)")
   args = parser.parse_args(argv)
   for p in write(args.out):

@@ -1,6 +1,6 @@
 """Soak: many fleet env steps in jitted chunks, checking the rules and the memory after each chunk.
 
-    python -m sims.soak --worlds 64 --robots-per-world 8 --chunk-steps 50 --chunks 200 [--devices all]
+    python -m sims.scripts.soak --worlds 64 --robots-per-world 8 --chunk-steps 50 --chunks 200 [--devices all]
 
 After every chunk (one compiled `FleetEnv.rollout_fn`, states carried) it checks:
 
@@ -102,9 +102,8 @@ def run_soak(*, num_worlds: int = 16, robots_per_world: int = 4, chunk_steps: in
       log(f"chunk {c + 1}/{num_chunks}: {(c + 1) * chunk_steps * num_worlds} world-steps, nan {nan}, "
           f"keepout entries {entries}, worst zone excess {worst:+.4f} m/s, {kind} {mem}")
   seconds = time.perf_counter() - t0
-  # bytes_in_use oscillates as the allocator reuses blocks (seen on an H100: 43.7-55.1 MB over
-  # 10 chunks, back to 43.7 MB at chunk 7), so "flat" means no upward trend: after the
-  # warm-up chunk, the later half's peak does not exceed the earlier half's peak.
+  # bytes_in_use oscillates as the allocator reuses blocks, so "flat" means no upward trend:
+  # after the warm-up chunk, the later half's peak does not exceed the earlier half's peak.
   steady = memory[1:]
   if len(steady) >= 2:
     half = len(steady) // 2
@@ -124,12 +123,13 @@ def run_soak(*, num_worlds: int = 16, robots_per_world: int = 4, chunk_steps: in
 
 
 def main(argv=None) -> int:
-  ap = argparse.ArgumentParser(prog="python -m sims.soak", description=__doc__.splitlines()[0])
-  ap.add_argument("--worlds", type=int, default=16)
-  ap.add_argument("--robots-per-world", type=int, default=4)
-  ap.add_argument("--chunk-steps", type=int, default=25)
-  ap.add_argument("--chunks", type=int, default=10)
-  ap.add_argument("--seed", type=int, default=0)
+  ap = argparse.ArgumentParser(prog="python -m sims.scripts.soak", description=__doc__.splitlines()[0],
+                               epilog="exit codes: 0 every check passed, 2 bad option, 3 a check failed")
+  ap.add_argument("--worlds", type=int, default=16, help="independent worlds (default 16)")
+  ap.add_argument("--robots-per-world", type=int, default=4, help="robots per world (default 4)")
+  ap.add_argument("--chunk-steps", type=int, default=25, help="env steps per jitted chunk (default 25)")
+  ap.add_argument("--chunks", type=int, default=10, help="chunks to run, checked after each (default 10)")
+  ap.add_argument("--seed", type=int, default=0, help="PRNG seed (default 0)")
   ap.add_argument("--devices", default=None, help="N or 'all': shard the worlds over devices")
   args = ap.parse_args(argv)
   devices = args.devices

@@ -1,6 +1,6 @@
 """PPO on the fleet RL env (`sims.rl.NavEnv`) with rejax's PPO, and its learning curve.
 
-    python -m sims.train_ppo --timesteps 400000 --out out/ppo        # needs the `rl` extra
+    python -m sims.scripts.train_ppo --timesteps 400000 --out out/ppo   # needs the `rl` extra
 
 The trainer is rejax 0.1.3 (`rejax.PPO`, maintained, pure JAX: rollouts,
 GAE and updates are one jitted `lax.scan`), chosen because it runs on the
@@ -15,32 +15,21 @@ Brax's `EpisodeWrapper` (time limit) inside, auto-reset outside (to the
 episode's first state, or a fresh `reset`), and optionally a Playground
 `randomization_fn` drawn per episode.
 
-Measured on the 2-core CPU (examples/ppo_nav/): 3.1 M env steps in 356 s
-(8.7 k env steps/s, 64 envs); success (a goal reached in a 60 s episode) from
-0 % to ~80 % (mean of the last 10 evaluations), 0 keepout entries, 0
-collisions, ~0.04 s per episode above a zone's limit (one zone entry at speed,
-clipped at the next 20 Hz controller tick).
+examples/ppo_nav/ has a 3 M-step run with its learning curve and results.
 
 Evaluation (`evaluate_policy`) runs the policy's mean action (no sampling
 noise) on `num_eval` envs for one episode each and reports, per episode:
 return, success (a goal reached before the episode ended), goals reached,
 keepout entries, collisions, seconds above a speed limit, and the command the
-speed filter had to clip. `main` writes OUT/learning_curve.png and
-OUT/results.json.
+speed filter had to clip. The training script (sims/scripts/train_ppo.py)
+writes OUT/learning_curve.png and OUT/results.json.
 """
 
-import argparse
-import json
-import sys
 import time
 from pathlib import Path
 from typing import Any, Callable
 
-from jaxfilters import xla_flags
-
-xla_flags.use_fast_cpu_compile()   # before the JAX backend starts (see jaxfilters/xla_flags.py)
-
-import jax  # noqa: E402
+import jax
 import jax.numpy as jnp
 import numpy as np
 
@@ -49,7 +38,7 @@ from flax import struct
 from gymnax.environments import spaces
 import rejax
 
-from sims.rl import NavEnv, NavEnvConfig
+from sims.rl import NavEnv
 
 _F32 = jnp.float32
 
@@ -308,59 +297,3 @@ def plot_curve(evals: dict, path: Path, title: str) -> Path:
   fig.savefig(path)
   plt.close(fig)
   return path
-
-
-def main(argv=None) -> int:
-  ap = argparse.ArgumentParser(prog="python -m sims.train_ppo",
-                               description="Train PPO (rejax) on the fleet RL env and plot its learning curve.")
-  ap.add_argument("--timesteps", type=int, default=400_000, help="env steps to train (default 400k)")
-  ap.add_argument("--num-envs", type=int, default=32, help="parallel envs (default 32)")
-  ap.add_argument("--num-steps", type=int, default=64, help="rollout length per update (default 64)")
-  ap.add_argument("--episode-length", type=int, default=150, help="env steps of 0.2 s per episode (default 150)")
-  ap.add_argument("--evals", type=int, default=20, help="evaluation points on the curve (default 20)")
-  ap.add_argument("--num-eval", type=int, default=32, help="episodes per evaluation (default 32)")
-  ap.add_argument("--keepout", choices=("terminate", "penalty"), default="terminate")
-  ap.add_argument("--randomize", action="store_true", help="randomise zones and goals per episode")
-  ap.add_argument("--seed", type=int, default=0)
-  ap.add_argument("--out", type=Path, default=Path("out/ppo"))
-  args = ap.parse_args(argv)
-  for name in ("timesteps", "num_envs", "num_steps", "episode_length", "evals", "num_eval"):
-    if getattr(args, name) < 1:
-      ap.error(f"--{name.replace('_', '-')} must be >= 1; got {getattr(args, name)}")
-
-  from sims.rl import randomize_zones_and_goals
-  env = NavEnv.create(config=NavEnvConfig(keepout=args.keepout))
-  adapter = GymnaxAdapter(env, args.episode_length, randomize_zones_and_goals if args.randomize else None)
-  per_iter = args.num_envs * args.num_steps
-  iters = max(1, -(-args.timesteps // per_iter))
-  per_call = max(1, iters // args.evals)
-  num_calls = -(-iters // per_call)
-  algo = make_ppo(adapter, timesteps_per_call=per_call * per_iter, num_envs=args.num_envs,
-                  num_steps=args.num_steps)
-  steps = num_calls * per_call * per_iter
-  device = jax.devices()[0].device_kind
-  print(f"PPO (rejax 0.1.3) on NavEnv: {steps} env steps, {args.num_envs} envs, device {device}",
-        file=sys.stderr)
-  _, evals, timing = train_with_curve(adapter, algo, jax.random.PRNGKey(args.seed), num_calls=num_calls,
-                                      num_eval=args.num_eval)
-  result = {"trainer": "rejax.PPO 0.1.3", "jax": jax.__version__, "device": device, "env_steps": steps,
-            **timing, "env_steps_per_s": steps / timing["train_s"],
-            "config": {k: (str(v) if isinstance(v, Path) else v) for k, v in vars(args).items()},
-            "curve": evals, "final": {k: v[-1] for k, v in evals.items()},
-            "initial": {k: v[0] for k, v in evals.items()}}
-  args.out.mkdir(parents=True, exist_ok=True)
-  (args.out / "results.json").write_text(json.dumps(result, indent=2))
-  png = plot_curve(evals, args.out / "learning_curve.png",
-                   f"PPO (rejax) on NavEnv, {device}: {steps / 1e3:.0f}k env steps in "
-                   f"{timing['train_s']:.0f} s")
-  print(f"compile {timing['compile_train_s']:.1f} s (train) + {timing['compile_eval_s']:.1f} s (eval), "
-        f"train {timing['train_s']:.1f} s ({steps / timing['train_s']:.0f} env steps/s)")
-  f, i = result["final"], result["initial"]
-  for name in EVAL_KEYS:
-    print(f"  {name:<18} start {i[name]:8.3f}   end {f[name]:8.3f}")
-  print(f"wrote {args.out / 'results.json'}, {png}")
-  return 0
-
-
-if __name__ == "__main__":
-  sys.exit(main())
