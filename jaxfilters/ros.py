@@ -41,7 +41,8 @@ from jaxfilters.validate import float32_values, resolution_value, short_repr
 
 __all__ = [
     "BOOL", "COSTMAP_FILTER_INFO", "MAX_SPEED", "MSG_DEFINITIONS", "OCCUPANCY_GRID", "SPEED_LIMIT",
-    "BagMessage", "binary_state_msgs", "bool_from_msg", "bool_to_msg", "filter_info_from_msg",
+    "STORAGES", "BagMessage", "binary_state_msgs", "bool_from_msg", "bool_to_msg", "costmap_to_occupancy",
+    "filter_info_from_msg",
     "filter_info_to_msg", "header_msg", "occupancy_grid_from_msg", "occupancy_grid_to_msg",
     "read_bag", "speed_limit_from_msg", "speed_limit_msgs", "speed_limit_to_msg", "time_msg",
     "typestore", "write_bag",
@@ -255,6 +256,40 @@ def occupancy_grid_to_msg(grid: OccupancyGrid, *, stamp: dict | None = None,
       },
       "data": np.ascontiguousarray(data, np.int8).ravel(),
   }
+
+
+def costmap_to_occupancy(cost) -> np.ndarray:
+  """Costmap costs -> the values Nav2's costmap publisher puts in an OccupancyGrid.
+
+  The publisher's `cost_translation_table_` (docs/nav2_semantics.md §1.6):
+  0 -> 0, 1..252 -> 1 + (97 * (c - 1)) // 251, 253 -> 99, 254 -> 100, 255 -> -1.
+
+  Args:
+    cost: uint8 (or integer) array of costs 0..255.
+
+  Returns:
+    int8 array of the same shape, values -1..100.
+
+  Raises:
+    ValueError: a non-integer array or values outside 0..255.
+  """
+  c = np.asarray(cost)
+  if c.dtype == bool or not np.issubdtype(c.dtype, np.integer):
+    raise ValueError(f"costs must be an integer array; got dtype {c.dtype}")
+  if c.size and (c.min() < 0 or c.max() > 255):
+    raise ValueError(f"costs must be 0..255; got {int(c.min())}..{int(c.max())}")
+  return _COST_TRANSLATION[c.astype(np.intp)]
+
+
+def _translation_table() -> np.ndarray:
+  table = np.empty(256, np.int8)
+  table[0] = 0
+  table[1:253] = 1 + (97 * (np.arange(1, 253) - 1)) // 251
+  table[253], table[254], table[255] = 99, 100, -1
+  return table
+
+
+_COST_TRANSLATION = _translation_table()
 
 
 def _yaw(q: dict, where: str) -> float:
@@ -562,9 +597,13 @@ def _from_ros(ts, msgtype: str, obj) -> dict:
   return out
 
 
+STORAGES = ("sqlite3", "mcap")
+
+
 def write_bag(path: str | os.PathLike, messages: Iterable[tuple[str, str, int, dict]], *,
-              store: str = "ros2_humble", version: int = 8) -> None:
-  """Writes (topic, msgtype, timestamp_ns, dict) messages to a new rosbag2 folder (sqlite3).
+              store: str = "ros2_humble", version: int = 8, storage: str = "sqlite3",
+              latched: Iterable[str] = ()) -> None:
+  """Writes (topic, msgtype, timestamp_ns, dict) messages to a new rosbag2 folder.
 
   Args:
     path: the bag folder to create (must not exist).
@@ -572,6 +611,11 @@ def write_bag(path: str | os.PathLike, messages: Iterable[tuple[str, str, int, d
       ns >= 0, the message dict) tuples, in time order or not.
     store: the rosbags type store (ROS distribution) to serialize with.
     version: rosbag2 metadata version, 8 or 9.
+    storage: "sqlite3" (rosbag2's older default) or "mcap" (the default
+      since ROS 2 Iron; what Foxglove and PlotJuggler open directly).
+    latched: topics recorded with a transient-local, reliable QoS (as Nav2's
+      map and mask servers publish), so `ros2 bag play` re-offers them to
+      late subscribers such as RViz.
 
   Raises:
     ImportError: rosbags is not installed (install jaxfilters[ros]).
@@ -583,6 +627,9 @@ def write_bag(path: str | os.PathLike, messages: Iterable[tuple[str, str, int, d
   ts = typestore(store)
   if version not in (8, 9):
     raise ValueError(f"version must be 8 or 9 (rosbag2 metadata); got {short_repr(version)}")
+  if storage not in STORAGES:
+    raise ValueError(f"storage must be one of {STORAGES}; got {short_repr(storage)}")
+  latched = set(latched)
   path = os.fspath(path)
   if os.path.exists(path):
     raise FileExistsError(f"rosbag2 folder {path} already exists; choose a new path")
@@ -598,13 +645,25 @@ def write_bag(path: str | os.PathLike, messages: Iterable[tuple[str, str, int, d
                        f"{store!r}")
     stamp = _int(stamp, f"messages[{i}] timestamp (ns)", 0, 2**63 - 1)
     items.append((topic, msgtype, stamp, _to_ros(ts, msgtype, msg, f"messages[{i}] {msgtype}")))
-  with rosbag2.Writer(path, version=version) as writer:
+  plugin = rosbag2.StoragePlugin.MCAP if storage == "mcap" else rosbag2.StoragePlugin.SQLITE3
+  items.sort(key=lambda item: item[2])
+  with rosbag2.Writer(path, version=version, storage_plugin=plugin) as writer:
     connections = {}
     for topic, msgtype, stamp, obj in items:
       key = (topic, msgtype)
       if key not in connections:
-        connections[key] = writer.add_connection(topic, msgtype, typestore=ts)
+        qos = (_latched_qos(),) if topic in latched else ()
+        connections[key] = writer.add_connection(topic, msgtype, typestore=ts, offered_qos_profiles=qos)
       writer.write(connections[key], stamp, ts.serialize_cdr(obj, msgtype))
+
+
+def _latched_qos():
+  from rosbags.interfaces import (Qos, QosDurability, QosHistory, QosLiveliness,  # noqa: PLC0415
+                                  QosReliability, QosTime)
+
+  never = QosTime(0, 0)
+  return Qos(QosHistory.KEEP_LAST, 1, QosReliability.RELIABLE, QosDurability.TRANSIENT_LOCAL, never, never,
+             QosLiveliness.AUTOMATIC, never, False)
 
 
 def read_bag(path: str | os.PathLike, *, topics: Iterable[str] | None = None,

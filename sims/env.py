@@ -117,6 +117,27 @@ class Frame:
   speed_cap: jax.Array
 
 
+@pytree_dataclass
+class TickFrame:
+  """What a rollout records per controller tick and robot (for rosbag2 replay: sims/bag.py).
+
+  Attributes:
+    time: float32 [...] simulated time (s) at the start of the tick; the speed
+      filter ran and the command was chosen then.
+    pose: float32 [..., K, 3] (x, y, yaw) at the start of the tick, where the
+      speed filter read the mask.
+    cmd: float32 [..., K, 2] (v m/s, w rad/s), the tick's command after the speed clip.
+    speed_limit: float32 [..., K] the speed filter's limit in force (Nav2's
+      SpeedLimit value: percent or m/s by the mask type; 0.0 = no limit).
+    speed_cap: float32 [..., K] that limit in m/s (+inf = none).
+  """
+  time: jax.Array
+  pose: jax.Array
+  cmd: jax.Array
+  speed_limit: jax.Array
+  speed_cap: jax.Array
+
+
 def mjx_step(model: mjx.Model, data: mjx.Data, ctrl: jax.Array) -> mjx.Data:
   """mjx.step of one robot with ctrl written first.
 
@@ -290,6 +311,21 @@ class FleetEnv:
     Returns:
       The next WorldState.
     """
+    return self._advance(state, action, record_ticks=False)[0]
+
+  def step_ticks(self, state: WorldState, action: jax.Array) -> tuple[WorldState, TickFrame]:
+    """`step`, also returning what each controller tick did.
+
+    Args:
+      state: WorldState of one world.
+      action: int32 [K] goal station per robot; -1 keeps the robot's goal.
+
+    Returns:
+      (the next WorldState, TickFrame with leaves [ticks_per_step, ...]).
+    """
+    return self._advance(state, action, record_ticks=True)
+
+  def _advance(self, state: WorldState, action: jax.Array, *, record_ticks: bool):
     cfg = self.config
     with jax.named_scope("fleet_step"):
       action = jnp.asarray(action, jnp.int32)
@@ -301,9 +337,18 @@ class FleetEnv:
           progress_time=jnp.where(override, 0.0, state.progress_time))
       state = self._update_costmaps(state)
       t0 = state.time
-      state, _ = jax.lax.scan(lambda s, i: (self._tick(s, t0 + i.astype(_F32) * jnp.float32(cfg.control_dt)), None),
-                              state, jnp.arange(cfg.ticks_per_step))
-      return dataclasses.replace(state, time=state.time + jnp.asarray(cfg.step_seconds, _F32))
+
+      def tick(s, i):
+        t = t0 + i.astype(_F32) * jnp.float32(cfg.control_dt)
+        pose = s.data.qpos[:, :3]
+        s = self._tick(s, t)
+        return s, (self._tick_frame(s, t, pose) if record_ticks else None)
+
+      state, ticks = jax.lax.scan(tick, state, jnp.arange(cfg.ticks_per_step))
+      return dataclasses.replace(state, time=state.time + jnp.asarray(cfg.step_seconds, _F32)), ticks
+
+  def _tick_frame(self, s: WorldState, t: jax.Array, pose: jax.Array) -> TickFrame:
+    return TickFrame(time=t, pose=pose, cmd=s.cmd, speed_limit=s.speed.speed_limit_prev, speed_cap=s.speed_cap)
 
   def _pick_goals(self, key, goal, xy):
     """A new random station per robot: not its current goal, not another robot's, > 2 m away."""
@@ -478,8 +523,8 @@ class FleetEnv:
     rep = jax.sharding.NamedSharding(mesh, jax.sharding.PartitionSpec())
     return jax.jit(fn, in_shardings=(rep, worlds), out_shardings=worlds)
 
-  def rollout_fn(self, num_steps: int, *, record: bool = True,
-                 mesh: jax.sharding.Mesh | None = None) -> "Rollout":
+  def rollout_fn(self, num_steps: int, *, record: bool = True, record_ticks: bool = False,
+                 record_costmaps: int = 0, mesh: jax.sharding.Mesh | None = None) -> "Rollout":
     """A jitted rollout of `num_steps` env steps over W worlds (`lax.scan` of `vmap(step)`).
 
     `run(params, states, actions=None)` takes the WorldParams (a jit argument,
@@ -491,20 +536,51 @@ class FleetEnv:
     the world axis of states, actions and frames is sharded over its devices
     and params are replicated; the results equal the unsharded ones.
 
+    With `record_ticks` the frames are a `Recording` instead: the Frame per
+    step, a TickFrame per controller tick (leaves [num_steps, ticks_per_step,
+    W, K, ...]) and, with `record_costmaps` = L > 0, the local costmaps of the
+    first L robots (world-major order) at each step (`Costmap` leaves
+    [num_steps, L, ...], cost uint8 [num_steps, L, N, N]).
+
     Args:
       num_steps: env steps per call (1 / costmap_hz seconds each).
       record: return a Frame per step (False: frames are None).
+      record_ticks: return a Recording with per-tick frames (implies record).
+      record_costmaps: L, local costmaps recorded per step (needs record_ticks;
+        at most W * K, checked when called).
       mesh: optional 1-D jax.sharding.Mesh over the world axis.
 
     Returns:
       A Rollout (callable; `.compile(params, states)` compiles ahead of time).
+
+    Raises:
+      ValueError: record_costmaps < 0, or > 0 without record_ticks; record_ticks with a mesh.
     """
+    if not isinstance(record_costmaps, int) or record_costmaps < 0:
+      raise ValueError(f"record_costmaps must be an int >= 0; got {record_costmaps!r}")
+    if record_costmaps and not record_ticks:
+      raise ValueError("record_costmaps needs record_ticks=True")
+    if record_ticks and mesh is not None:
+      raise ValueError("record_ticks records on one device: build the rollout without a mesh")
+    record = record or record_ticks
+
     def run(params, states, actions):
       env = self.with_params(params)
 
       def body(s, a):
-        s = jax.vmap(env.step)(s, a)
-        return s, (jax.vmap(env.frame)(s) if record else None)
+        if not record_ticks:
+          s = jax.vmap(env.step)(s, a)
+          return s, (jax.vmap(env.frame)(s) if record else None)
+        s, ticks = jax.vmap(env.step_ticks)(s, a)
+        ticks = jax.tree.map(lambda x: jnp.swapaxes(x, 0, 1), ticks)   # [W, T, ...] -> [T, W, ...]
+        local = None
+        if record_costmaps:
+          flat = jax.tree.map(lambda x: x.reshape((-1,) + x.shape[2:]), s.local)
+          if record_costmaps > flat.cost.shape[0]:
+            raise ValueError(f"record_costmaps ({record_costmaps}) exceeds the robots of the rollout "
+                             f"({flat.cost.shape[0]})")
+          local = jax.tree.map(lambda x: x[:record_costmaps], flat)
+        return s, Recording(frame=jax.vmap(env.frame)(s), ticks=ticks, costmaps=local)
 
       return jax.lax.scan(body, states, actions)
 
@@ -517,6 +593,20 @@ class FleetEnv:
     jitted = jax.jit(run, in_shardings=(rep, worlds, time_major),
                      out_shardings=(worlds, time_major if record else None))
     return Rollout(jitted, num_steps, self.num_robots)
+
+
+@pytree_dataclass
+class Recording:
+  """What a rollout built with `record_ticks=True` returns per env step.
+
+  Attributes:
+    frame: Frame, leaves [num_steps, W, K, ...].
+    ticks: TickFrame, leaves [num_steps, ticks_per_step, W, K, ...] (time [num_steps, ticks_per_step, W]).
+    costmaps: Costmap of the first L robots, leaves [num_steps, L, ...], or None.
+  """
+  frame: Frame
+  ticks: TickFrame
+  costmaps: Costmap | None
 
 
 class Rollout:
