@@ -1,5 +1,5 @@
 # `make demo` builds .venv with the base dependencies only (what the fleet demo needs);
-# `make test` adds the test extras (pytest, hypothesis, notebooks, ROS bags, RL). Both are pinned
+# `make test` adds the test and docs extras (pytest, hypothesis, notebooks, ROS bags, RL, mkdocs). Both are pinned
 # by constraints.txt, built on first use and reused; a stamp is redone when pyproject.toml or
 # constraints.txt change. Python >= 3.11 (PYTHON=python3.12 make demo picks another one).
 PYTHON ?= python3
@@ -19,7 +19,7 @@ $(BASE_STAMP): pyproject.toml constraints.txt
 	touch $(BASE_STAMP)
 
 $(TEST_STAMP): $(BASE_STAMP)
-	$(PY) -m pip install -q -c constraints.txt -e '.[test]'
+	$(PY) -m pip install -q -c constraints.txt -e '.[test,docs]'
 	touch $(TEST_STAMP)
 
 demo: $(BASE_STAMP)
@@ -42,6 +42,5 @@ clean:
 .PHONY: docs
 
 # The API reference from the docstrings (mkdocs.yml, strict: a broken cross-reference fails) into site/.
-docs: $(STAMP)
-	$(PY) -m pip install -q -c constraints.txt -e '.[docs]'
+docs: $(TEST_STAMP)
 	$(PY) -m mkdocs build --strict --site-dir site

@@ -1,6 +1,6 @@
 """jaxfilters: Nav2-faithful costmap filters as batched, jittable JAX functions.
 
-Layers, types -> geometry -> filters -> pipelines (STYLE.md habit 1). Each
+Layers, types -> geometry -> filters -> pipelines: imports run one way. Each
 filter is written for one robot (`*_one`) and vmapped once at the public edge;
 public functions take an explicit leading robot axis B.
 """
@@ -17,8 +17,8 @@ from jaxfilters.map_io import (MAX_MAP_CELLS, MapMetadata, load_map, load_map_im
                                load_map_with_metadata, save_map)
 from jaxfilters.pipeline import LayersConfig, costmap_pipeline
 from jaxfilters.nav2 import (Nav2BinaryFilter, Nav2Costmap, Nav2Filter, Nav2KeepoutFilter, Nav2Params,
-                             Nav2ParamsWarning, Nav2Readout, Nav2SpeedFilter, Nav2ZoneFilter, ZoneSetpoint,
-                             ZoneStateConfig, load_params)
+                             Nav2ParamsError, Nav2ParamsWarning, Nav2Readout, Nav2SpeedFilter, Nav2ZoneFilter,
+                             ZoneSetpoint, ZoneStateConfig, load_params)
 from jaxfilters.query import binary_at, keepout_cost_at, speed_limit_at, zone_at
 from jaxfilters.shapes import (OVERLAY_MAX, OVERLAY_MIN, OVERLAY_SEQ, Circle, Polygon, RasterResult, Shapes,
                                rasterize, rasterize_mask)
@@ -34,8 +34,8 @@ __all__ = [
     "__version__", "BinaryResult", "BinaryState", "Circle", "Costmap", "FilterInfo", "FilterMask",
     "InflationConfig", "KeepoutConfig", "KeepoutState", "LayersConfig", "LookaheadConfig",
     "MAX_MAP_CELLS", "MapMetadata", "Nav2BinaryFilter", "Nav2Costmap", "Nav2Filter",
-    "Nav2KeepoutFilter", "Nav2Params", "Nav2ParamsWarning", "Nav2Readout", "Nav2SpeedFilter",
-    "Nav2ZoneFilter", "OVERLAY_MAX", "OVERLAY_MIN", "OVERLAY_SEQ", "OccupancyGrid", "Polygon",
+    "Nav2KeepoutFilter", "Nav2Params", "Nav2ParamsError", "Nav2ParamsWarning", "Nav2Readout",
+    "Nav2SpeedFilter", "Nav2ZoneFilter", "OVERLAY_MAX", "OVERLAY_MIN", "OVERLAY_SEQ", "OccupancyGrid", "Polygon",
     "RasterResult", "Shapes", "SpeedResult", "SpeedState", "StaticLayerConfig", "ZoneResult",
     "ZoneSetpoint", "ZoneState", "ZoneStateConfig", "ZoneTable", "binary_at", "binary_filter",
     "constants", "costmap_pipeline", "footprint_radii", "inflate", "jaus", "keepout_cost_at",

@@ -1,6 +1,6 @@
 """Footprint-aware robot-in-zone test for the keepout filter's escape mode (beyond Nav2).
 
-Nav2's escape mode (`override_lethal_cost`, spec §4.2) is on while the robot's
+Nav2's escape mode (`override_lethal_cost`, docs/nav2_semantics.md §4.2) is on while the robot's
 *centre* is on a lethal keepout cell. Issue #6505 (open) calls it unusable: half
 the footprint can stand in a zone without switching it on, and once the centre
 leaves, the zone is lethal again and, inflated as a layer, holds the robot in
@@ -273,7 +273,7 @@ def footprint_in_zone_one(data, mask_origin, mask_res, pose, *, polygon=None, ra
   cover = _covered(qx, qy, dx, dy, polygon, radius, margin)
   on_mask = (((col >= 0) & (col < wm))[None, :] & ((row >= 0) & (row < hm))[:, None])
   d = data[jnp.clip(row, 0, hm - 1)[:, None], jnp.clip(col, 0, wm - 1)[None, :]]
-  lethal = d == constants.OCC_GRID_OCCUPIED        # occ_to_cost(d) in {253, 254} <=> d == 100 (spec §1.4)
+  lethal = d == constants.OCC_GRID_OCCUPIED        # occ_to_cost(d) in {253, 254} <=> d == 100 (docs/nav2_semantics.md §1.4)
   return near & jnp.any(cover & on_mask & lethal)
 
 

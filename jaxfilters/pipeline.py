@@ -1,4 +1,4 @@
-"""Layers then filters, in Nav2's order (spec §2.5).
+"""Layers then filters, in Nav2's order (docs/nav2_semantics.md §2.5).
 
 `LayeredCostmap::updateMap` with filters: the *primary* map gets the plugins
 (static layer, obstacles, inflation), is copied into the *combined* map, and
@@ -118,7 +118,7 @@ def costmap_pipeline(static_data, origin, resolution, poses, *, config: LayersCo
     primary = _geometry(cost, origin, resolution)
     bounds_error = None
     if keepout_mask is not None:
-      # updateBounds pass (spec §2.5, §4.2): layers redraw the whole map.
+      # updateBounds pass (docs/nav2_semantics.md §2.5, §4.2): layers redraw the whole map.
       b = cost.shape[0]
       res = primary.resolution if primary.resolution_lo is None else (
           primary.resolution + primary.resolution_lo[:, 0] + primary.resolution_lo[:, 1])

@@ -41,7 +41,7 @@ from jaxfilters.validate import float32_values, resolution_value, short_repr
 
 __all__ = [
     "BOOL", "COSTMAP_FILTER_INFO", "MAX_SPEED", "MSG_DEFINITIONS", "OCCUPANCY_GRID", "SPEED_LIMIT",
-    "STORAGES", "BagMessage", "binary_state_msgs", "bool_from_msg", "bool_to_msg", "costmap_to_occupancy",
+    "STORAGES", "BagMessage", "binary_state_msgs", "bool_from_msg", "bool_to_msg",
     "filter_info_from_msg",
     "filter_info_to_msg", "header_msg", "occupancy_grid_from_msg", "occupancy_grid_to_msg",
     "read_bag", "speed_limit_from_msg", "speed_limit_msgs", "speed_limit_to_msg", "time_msg",
@@ -256,40 +256,6 @@ def occupancy_grid_to_msg(grid: OccupancyGrid, *, stamp: dict | None = None,
       },
       "data": np.ascontiguousarray(data, np.int8).ravel(),
   }
-
-
-def costmap_to_occupancy(cost) -> np.ndarray:
-  """Costmap costs -> the values Nav2's costmap publisher puts in an OccupancyGrid.
-
-  The publisher's `cost_translation_table_` (docs/nav2_semantics.md §1.6):
-  0 -> 0, 1..252 -> 1 + (97 * (c - 1)) // 251, 253 -> 99, 254 -> 100, 255 -> -1.
-
-  Args:
-    cost: uint8 (or integer) array of costs 0..255.
-
-  Returns:
-    int8 array of the same shape, values -1..100.
-
-  Raises:
-    ValueError: a non-integer array or values outside 0..255.
-  """
-  c = np.asarray(cost)
-  if c.dtype == bool or not np.issubdtype(c.dtype, np.integer):
-    raise ValueError(f"costs must be an integer array; got dtype {c.dtype}")
-  if c.size and (c.min() < 0 or c.max() > 255):
-    raise ValueError(f"costs must be 0..255; got {int(c.min())}..{int(c.max())}")
-  return _COST_TRANSLATION[c.astype(np.intp)]
-
-
-def _translation_table() -> np.ndarray:
-  table = np.empty(256, np.int8)
-  table[0] = 0
-  table[1:253] = 1 + (97 * (np.arange(1, 253) - 1)) // 251
-  table[253], table[254], table[255] = 99, 100, -1
-  return table
-
-
-_COST_TRANSLATION = _translation_table()
 
 
 def _yaw(q: dict, where: str) -> float:

@@ -14,6 +14,8 @@ cannot build a huge message).
 
 from __future__ import annotations
 
+import reprlib
+
 from typing import Any
 
 import numpy as np
@@ -24,12 +26,26 @@ _REPR_LIMIT = 80
 
 
 def short_repr(value: Any, limit: int = _REPR_LIMIT) -> str:
-  """repr(value) cut to `limit` characters (error messages stay short for any input)."""
+  """repr(value) cut to `limit` characters (error messages stay short and cheap for any input).
+
+  Containers are abbreviated while the text is built (`reprlib`: a few items per level, a few
+  levels deep), so a huge or deeply nested value costs no more than a small one.
+  """
   try:
-    text = repr(value)
+    text = _REPR.repr(value)
   except Exception:  # noqa: BLE001 - a hostile __repr__ must not hide the real error
     text = f"<{type(value).__name__}>"
   return text if len(text) <= limit else text[:limit - 3] + "..."
+
+
+def _bounded_repr() -> reprlib.Repr:
+  r = reprlib.Repr()
+  r.maxlevel, r.maxlist, r.maxtuple, r.maxdict, r.maxset, r.maxfrozenset = 4, 8, 8, 8, 8, 8
+  r.maxstring, r.maxother, r.maxlong = _REPR_LIMIT, _REPR_LIMIT, _REPR_LIMIT
+  return r
+
+
+_REPR = _bounded_repr()
 
 
 def _where(owner: str, name: str) -> str:

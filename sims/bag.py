@@ -217,7 +217,7 @@ def fleet_messages(scenario, rec: FleetRecording, *, max_speed: float, summary: 
   out.append(("/tf", TF_MESSAGE, _ns(rec.end_time), _tf(rec.end_time, rec.end_pose)))
   for s, t in enumerate(rec.costmap_time):
     for i in range(rec.costmap.shape[1]):
-      grid = _grid(ros.costmap_to_occupancy(rec.costmap[s, i]), rec.costmap_origin[s, i],
+      grid = _grid(constants.costmap_to_occupancy(rec.costmap[s, i]), rec.costmap_origin[s, i],
                    rec.costmap_resolution[s, i])
       out.append((f"/robot_{i}/local_costmap/costmap", ros.OCCUPANCY_GRID, _ns(t),
                   ros.occupancy_grid_to_msg(grid, stamp=_stamp(t))))

@@ -1,4 +1,4 @@
-"""Test-wide settings: strict rank promotion (STYLE.md habit 11), hypothesis budget."""
+"""Test-wide settings: strict rank promotion (silent broadcasting raises), hypothesis budget."""
 
 import os
 from pathlib import Path

@@ -1,4 +1,4 @@
-"""KeepoutFilter against the float64 reference, the spec's worked examples, run four ways."""
+"""KeepoutFilter against the float64 reference, the worked examples of docs/nav2_semantics.md, run four ways."""
 
 import functools
 import math
@@ -153,8 +153,8 @@ def test_spec_different_frames_example():
 def test_coarse_mask_loses_first_column_and_row():
   # The quirk of docs/nav2_semantics.md §4.3 with binary-exact sizes: master 1/16 m at (0,0), mask 1/8 m at (1,1),
   # 10x10. gx0 = int((1 + 1/16) / (1/16)) = 17, but master cell 16 (centre 1.03125) lies in
-  # the mask and is never visited. (With the spec's decimal 0.05/0.1 the float32 values
-  # give gx0 = 20 where Nav2's float64 0.05 gives 21: the float32 policy, geometry.py.)
+  # the mask and is never visited. (With the documented decimal 0.05/0.1 the float32 values
+  # give gx0 = 20 where Nav2's float64 0.05 gives 21: the float32 policy, jaxfilters/geometry/.)
   mask = _mask(np.full((10, 10), 100), 0.125, (1, 1))
   cm = Costmap.create(np.zeros((1, 48, 48), np.uint8), (0, 0), 0.0625)
   out, _ = ko.keepout_filter(cm, mask, np.zeros((1, 3)), ko.KeepoutState.create(1))

@@ -63,7 +63,7 @@ def _row(mode, occupied, free, negate=False, alpha=None):
 # --------------------------------------------------------------------------- pixel rules
 
 TABLE_G = [0, 89, 90, 127, 128, 191, 200, 205, 206, 253, 254, 255]
-# Spec §10.2 worked table, one column each: (mode, occupied, free) -> values for TABLE_G.
+# docs/nav2_semantics.md §10.2 worked table, one column each: (mode, occupied, free) -> values for TABLE_G.
 TABLE = {
     ("trinary", 0.65, 0.196): [100, 100, -1, -1, -1, -1, -1, -1, 0, 0, 0, 0],
     ("trinary", 0.65, 0.25): [100, 100, -1, -1, -1, -1, 0, 0, 0, 0, 0, 0],

@@ -16,7 +16,6 @@ import pytest
 
 from tests.compile_count import count_compiles
 import jaxfilters as jf
-from jaxfilters import keepout as ko
 from jaxfilters import speed as sp
 from jaxfilters.grid import OccupancyGrid
 from sims import metrics

@@ -272,3 +272,15 @@ def test_nav2_costmap_readout_reads_the_keepout_filters_cell_at_origin_minus_15_
   got = np.asarray(costmap.readout(poses).keepout_cost)
   assert got.tolist() == [0, 254]                    # exact floor: cell 2, then cell 3
   assert got.tolist() == np.asarray(jf.keepout_cost_at(keepout, poses[:, :2])).tolist()
+
+
+def test_error_messages_stay_short_and_cheap_for_huge_values():
+  """A list bomb shown in an error message: the text is built in bounded time and length."""
+  import time
+  from jaxfilters import validate
+  bomb = [0.0]
+  for _ in range(30):
+    bomb = [bomb] * 9                   # 9**30 leaves if expanded
+  t0 = time.perf_counter()
+  text = validate.short_repr(bomb)
+  assert time.perf_counter() - t0 < 1.0 and len(text) <= 80

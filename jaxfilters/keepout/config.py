@@ -23,7 +23,7 @@ def occ_to_cost(data: jax.Array) -> jax.Array:
   """Mask value -> cost (docs/nav2_semantics.md §1.4): round-half-away(2.54 * d), -1 -> 255.
 
   Values outside -1..100 (never produced by map_server; undefined behaviour in
-  Nav2) are treated as unknown (255), as the spec recommends. Uses integer
+  Nav2) are treated as unknown (255), as docs/nav2_semantics.md §1.4 recommends. Uses integer
   arithmetic: floor((254 d + 50) / 100) == floor(2.54 d + 0.5) exactly.
 
   Args:

@@ -20,10 +20,10 @@ from __future__ import annotations
 
 import dataclasses
 import fnmatch
-import reprlib
 from collections.abc import Mapping
 from typing import Any
 
+from jaxfilters import validate
 from jaxfilters.map_decode import read_regular_file
 from jaxfilters.strict_yaml import parse_yaml
 
@@ -55,18 +55,9 @@ class Nav2ParamsError(ValueError):
     super().__init__(cut(str(message), MAX_MESSAGE))
 
 
-# Values shown in messages: a few elements at a few levels, whatever their size.
-_REPR = reprlib.Repr()
-_REPR.maxlevel, _REPR.maxlist, _REPR.maxdict, _REPR.maxstring, _REPR.maxother = 3, 6, 6, 60, 60
-
-
 def show(value: Any) -> str:
-  """A bounded repr: time and length do not grow with the value's size."""
-  try:
-    text = _REPR.repr(value)
-  except Exception:  # noqa: BLE001 - a hostile __repr__ must not hide the real error
-    text = f"<{type(value).__name__}>"
-  return cut(text, 200)
+  """A bounded repr (`validate.short_repr`): time and length do not grow with the value's size."""
+  return validate.short_repr(value, 200)
 
 
 def cut(text: str, limit: int) -> str:
