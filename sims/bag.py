@@ -135,7 +135,8 @@ def check_bag_dir(path: str | os.PathLike, *, overwrite: bool = False) -> Path:
 
   Args:
     path: the bag folder: new, or an existing empty folder, or (overwrite) an
-      existing bag folder to replace.
+      existing rosbag2 folder to replace (one that holds only metadata.yaml and
+      .mcap/.db3 files: nothing else is ever deleted).
     overwrite: replace an existing non-empty folder.
 
   Returns:
@@ -143,13 +144,20 @@ def check_bag_dir(path: str | os.PathLike, *, overwrite: bool = False) -> Path:
 
   Raises:
     BagError: a file is in the way, the folder is not empty (without
-      overwrite), or the parent folder is missing or not writable.
+      overwrite) or not a bag folder (with it), or the parent folder is
+      missing or not writable.
   """
   path = Path(path)
   if path.exists() and not path.is_dir():
     raise BagError(f"--bag {path}: exists and is not a folder")
-  if path.is_dir() and any(path.iterdir()) and not overwrite:
-    raise BagError(f"--bag {path}: folder is not empty (pass --overwrite to replace it)")
+  if path.is_dir() and any(path.iterdir()):
+    if not overwrite:
+      raise BagError(f"--bag {path}: folder is not empty (pass --overwrite to replace it)")
+    names = {p.name for p in path.iterdir()}
+    if "metadata.yaml" not in names or any(not (n == "metadata.yaml" or n.endswith((".mcap", ".db3")))
+                                           for n in names):
+      raise BagError(f"--bag {path}: holds files other than a rosbag2 bag's; --overwrite replaces only a bag "
+                     "folder (metadata.yaml and .mcap/.db3 files)")
   parent = path.resolve().parent
   if not parent.is_dir():
     raise BagError(f"--bag {path}: parent folder {parent} does not exist")

@@ -173,6 +173,11 @@ def test_bag_folder_checks(tmp_path):
   (tmp_path / "full" / "x").write_text("x")
   with pytest.raises(bag_lib.BagError, match="not empty"):
     bag_lib.check_bag_dir(tmp_path / "full")
+  with pytest.raises(bag_lib.BagError, match="other than a rosbag2"):
+    bag_lib.check_bag_dir(tmp_path / "full", overwrite=True)       # never deletes a folder that is not a bag
+  (tmp_path / "full" / "x").unlink()
+  (tmp_path / "full" / "metadata.yaml").write_text("rosbag2_bagfile_information: {}")
+  (tmp_path / "full" / "run_0.mcap").write_bytes(b"")
   assert bag_lib.check_bag_dir(tmp_path / "full", overwrite=True) == tmp_path / "full"
   with pytest.raises(bag_lib.BagError, match="does not exist"):
     bag_lib.check_bag_dir(tmp_path / "missing" / "bag")
@@ -200,3 +205,29 @@ def test_bag_picture_reads_the_bag(run, tmp_path):
   assert out.stat().st_size > 10_000
   with pytest.raises(ValueError, match="robot 99 is not in the bag"):
     bag_view.bag_figure(path, robot=99)
+
+
+@pytest.mark.parametrize("extra, message", [
+    (["--bag-robots", "2"], "--bag-robots needs --bag"),
+    (["--bag-costmaps", "1"], "--bag-costmaps needs --bag"),
+    (["--overwrite"], "--overwrite needs --bag"),
+    (["--bag", "{tmp}/b", "--bag-robots", "0"], "--bag-robots must lie in [1, --robots = 4]"),
+    (["--bag", "{tmp}/b", "--bag-robots", "5"], "--bag-robots must lie in [1, --robots = 4]"),
+    (["--bag", "{tmp}/b", "--bag-robots", "2", "--bag-costmaps", "3"], "--bag-costmaps must lie in [0, bag robots = 2]"),
+    (["--bag", "{tmp}/full"], "folder is not empty"),
+    (["--bag", "{tmp}/full", "--overwrite"], "other than a rosbag2"),
+    (["--bag", "{tmp}/file"], "not a folder"),
+    (["--bag", "{tmp}/missing/b"], "does not exist"),
+    (["--bag", "{tmp}/b", "--devices", "1"], "--bag records on one device"),
+])
+def test_fleet_bag_arguments_are_checked_before_simulating(tmp_path, capsys, extra, message):
+  from jaxfilters import cli
+  (tmp_path / "full").mkdir()
+  (tmp_path / "full" / "notes.txt").write_text("keep me")
+  (tmp_path / "file").write_text("x")
+  args = ["fleet", "--robots", "4", "--steps", "1", "--out", str(tmp_path / "out")]
+  rc = cli.main(args + [a.replace("{tmp}", str(tmp_path)) for a in extra])
+  err = capsys.readouterr().err
+  assert rc == 2 and message in err and len(err.strip().splitlines()) == 1, err
+  assert (tmp_path / "full" / "notes.txt").read_text() == "keep me"
+  assert not (tmp_path / "out" / "summary.json").exists()

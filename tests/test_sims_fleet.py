@@ -214,8 +214,15 @@ def keep_xla_flags(monkeypatch):
 def test_cli_fleet_writes_outputs(tmp_path, capsys, keep_xla_flags):
   out = tmp_path / "demo"
   rc = cli.main(["fleet", "--robots", "3", "--steps", "10", "--chunk-seconds", "1", "--out", str(out),
-                 "--animate", "--no-cache", "--seed", "1"])
+                 "--animate", "--no-cache", "--seed", "1", "--bag", str(tmp_path / "bag"), "--bag-costmaps", "1"])
   assert rc == 0
+  bag = sorted((tmp_path / "bag").glob("*.mcap"))
+  assert len(bag) == 1 and (tmp_path / "bag" / "metadata.yaml").is_file()
+  from mcap.reader import make_reader
+  with open(bag[0], "rb") as f:
+    topics = {c.topic for c in make_reader(f).get_summary().channels.values()}
+  assert {"/map", "/tf", "/robot_2/cmd_vel", "/robot_0/local_costmap/costmap", "/fleet/summary"} <= topics
+  assert "/robot_1/local_costmap/costmap" not in topics
   summary = json.loads((out / "summary.json").read_text())
   assert summary["fleet"]["robots"] == 3 and len(summary["robots"]) == 3
   assert summary["fleet"]["keepout_entries"] == 0 and summary["fleet"]["speed_compliant"]

@@ -66,6 +66,7 @@ examples:
       --mask speed_filter_mask_server=warehouse_speed.yaml \\
       --set KEEPOUT_ZONE_ENABLED=True --set SPEED_ZONE_ENABLED=True --out out/params
   jaxfilters fleet --keepout-escape footprint --robots-in-keepout 4 --seconds 30
+  jaxfilters fleet --seconds 60 --bag out/bag --bag-costmaps 2   # open out/bag in Foxglove
 
 Maps, one of three sets (no option is ignored: a mix is refused):
   none of --map/--keepout/--speed/--params   the built-in warehouse (its speed zones are fixed)
@@ -126,6 +127,15 @@ def register_fleet(sub) -> argparse.ArgumentParser:
                  "do (default off: Nav2's filter after inflation)")
   p.add_argument("--robots-in-keepout", type=int, default=0,
                  help="robots per world started with their footprint in a keepout zone (needs --keepout-escape)")
+  b = p.add_argument_group("rosbag2 (MCAP) of the run, for Foxglove, RViz and PlotJuggler (needs the ros extra)")
+  b.add_argument("--bag", type=Path, default=None, metavar="DIR",
+                 help="write the run as a rosbag2 folder in MCAP storage (map, masks, filter info, /tf, "
+                 "cmd_vel, speed_limit per robot; sims/bag.py lists the topics)")
+  b.add_argument("--bag-robots", type=int, default=None, metavar="N",
+                 help="robots recorded in the bag, the first N (default: up to 8)")
+  b.add_argument("--bag-costmaps", type=int, default=0, metavar="N",
+                 help="also record the local costmaps of the first N bag robots (default 0)")
+  b.add_argument("--overwrite", action="store_true", help="replace a non-empty --bag folder")
   p.add_argument("--no-check", action="store_true",
                  help="exit 0 even with keepout entries or speed violations")
   p.add_argument("--no-cache", action="store_true",
@@ -157,6 +167,34 @@ def _check_fleet_args(args) -> None:
     raise CliError("--robots-in-keepout needs --keepout-escape center or footprint (without escape mode a "
                    "robot started in a zone is deadlocked)")
   _check_map_args(args)
+  _check_bag_args(args)
+
+
+def _check_bag_args(args) -> None:
+  """--bag and its options: refused when they would be ignored, the folder checked before simulating."""
+  if args.bag is None:
+    for flag, value, unset in (("--bag-robots", args.bag_robots, None), ("--bag-costmaps", args.bag_costmaps, 0),
+                               ("--overwrite", args.overwrite, False)):
+      if value != unset:
+        raise CliError(f"{flag} needs --bag DIR (nothing else records a bag)")
+    return
+  from sims.bag import BagError, check_bag_dir
+  try:
+    import rosbags  # noqa: F401, PLC0415 - the optional dependency the bag writer needs
+  except ImportError:
+    raise CliError("--bag needs the rosbags package: pip install 'jaxfilters[ros]'") from None
+  if args.devices is not None:
+    raise CliError("--bag records on one device: drop --devices")
+  n = min(8, args.robots) if args.bag_robots is None else args.bag_robots
+  if not 1 <= n <= args.robots:
+    raise CliError(f"--bag-robots must lie in [1, --robots = {args.robots}]; got {n}")
+  if not 0 <= args.bag_costmaps <= n:
+    raise CliError(f"--bag-costmaps must lie in [0, bag robots = {n}]; got {args.bag_costmaps}")
+  args.bag_robots = n
+  try:
+    check_bag_dir(args.bag, overwrite=args.overwrite)
+  except BagError as e:
+    raise CliError(str(e)) from None
 
 
 def _check_map_args(args) -> None:
@@ -302,8 +340,8 @@ def _mesh(devices, num_worlds: int):
 def run_fleet(args) -> int:
   """Runs `jaxfilters fleet` with parsed arguments.
 
-  Writes OUT/summary.json, OUT/trajectories.png and with --animate OUT/fleet.gif,
-  and prints the summary table on stdout (progress on stderr).
+  Writes OUT/summary.json, OUT/trajectories.png, with --animate OUT/fleet.gif and with
+  --bag a rosbag2 (MCAP) folder, and prints the summary table on stdout (progress on stderr).
 
   Args:
     args: the argparse namespace of the `fleet` parser.
@@ -369,7 +407,9 @@ def run_fleet(args) -> int:
     raise CliError(f"{scenario.name}: {e}") from None
   states = env.reset_fn(mesh=mesh)(env.params, env.world_keys(jax.random.PRNGKey(args.seed), num_worlds))
   t1 = time.perf_counter()
-  compiled = {n: env.rollout_fn(n, mesh=mesh).compile(env.params, states) for n in sorted(set(lengths))}
+  bag = args.bag is not None
+  compiled = {n: env.rollout_fn(n, mesh=mesh, record_ticks=bag, record_costmaps=args.bag_costmaps if bag else 0)
+              .compile(env.params, states) for n in sorted(set(lengths))}
   compile_s = time.perf_counter() - t1
   setup_s = t1 - t0
   rec = min(args.record_robots, args.robots)
@@ -378,8 +418,12 @@ def run_fleet(args) -> int:
   progress = _Progress(total_steps * step_s)
   progress.update(0.0, time.perf_counter() - t_start)
   done = 0
+  recordings = []
   for n in lengths:
     states, frames = compiled[n](env.params, states)
+    if bag:
+      recordings.append(jax.tree.map(np.asarray, frames))
+      frames = frames.frame
     poses.append(np.asarray(frames.pose).reshape(n, -1, 3)[:, :rec])
     speeds.append(np.asarray(frames.speed).reshape(n, -1)[:, :rec])
     done += n
@@ -424,6 +468,11 @@ def run_fleet(args) -> int:
   if args.animate:
     written.append(render_gif(w, pose, speed, out / "fleet.gif", summary=summary,
                                 seconds_per_frame=step_s))
+  if bag:
+    from sims.bag import host_recording, write_fleet_bag
+    recording = host_recording(recordings, robots=args.bag_robots, step_seconds=step_s)
+    written.append(write_fleet_bag(args.bag, scenario, recording, max_speed=config.robot.max_speed,
+                                   summary=summary, overwrite=args.overwrite))
   header = (f"{scenario.name}: {args.robots} robots, {seconds:g} s simulated in {run_s:.1f} s "
             f"(setup {setup_s:.1f} s, compile {compile_s:.1f} s; "
             f"{summary['timing']['robot_steps_per_s']:.3g} robot-steps/s)")
