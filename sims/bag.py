@@ -143,9 +143,10 @@ def check_bag_dir(path: str | os.PathLike, *, overwrite: bool = False) -> Path:
     The path.
 
   Raises:
-    BagError: a file is in the way, the folder is not empty (without
-      overwrite) or not a bag folder (with it), or the parent folder is
-      missing or not writable.
+    BagError: a file is in the way (at the path or one of its parents), the
+      folder is not empty (without overwrite) or not a bag folder (with it),
+      or the nearest existing folder is not writable (missing parents are
+      created when the bag is written).
   """
   path = Path(path)
   if path.exists() and not path.is_dir():
@@ -158,10 +159,11 @@ def check_bag_dir(path: str | os.PathLike, *, overwrite: bool = False) -> Path:
                                            for n in names):
       raise BagError(f"--bag {path}: holds files other than a rosbag2 bag's; --overwrite replaces only a bag "
                      "folder (metadata.yaml and .mcap/.db3 files)")
-  parent = path.resolve().parent
-  if not parent.is_dir():
-    raise BagError(f"--bag {path}: parent folder {parent} does not exist")
-  target = path if path.is_dir() else parent
+  target = path.resolve()
+  while not target.exists():               # missing parents are created when the bag is written
+    target = target.parent
+  if not target.is_dir():
+    raise BagError(f"--bag {path}: {target} is not a folder")
   if not os.access(target, os.W_OK | os.X_OK):
     raise BagError(f"--bag {path}: {target} is not writable")
   return path
@@ -257,6 +259,7 @@ def write_fleet_bag(path: str | os.PathLike, scenario, rec: FleetRecording, *, m
   messages = fleet_messages(scenario, rec, max_speed=max_speed, summary=summary)
   if path.is_dir():
     shutil.rmtree(path)
+  path.parent.mkdir(parents=True, exist_ok=True)
   latched = (MAP_TOPIC, KEEPOUT_MASK_TOPIC, SPEED_MASK_TOPIC, KEEPOUT_INFO_TOPIC, SPEED_INFO_TOPIC)
   ros.write_bag(path, messages, storage="mcap", latched=latched)
   return path

@@ -98,13 +98,16 @@ def bag_figure(path, *, robot: int | None = None, width_in: float = 13.0, dpi: f
   for i in range(xy.shape[1]):
     ax_map.plot(xy[:, i, 0], xy[:, i, 1], lw=1.0, color=colours(i % 10), zorder=4)
     ax_map.plot(*xy[-1, i], "o", ms=4, color=colours(i % 10), zorder=5)
+  ax_map.annotate(f"robot_{robot}", xy[-1, robot], xytext=(6, 6), textcoords="offset points", fontsize=8,
+                  color=colours(robot % 10), fontweight="bold", zorder=6)
   ax_map.set_title(f"/map, masks and /tf ({xy.shape[1]} robots, {t[-1]:.0f} s)", fontsize=10)
   ax_map.legend(handles=handles, fontsize=6, loc="lower left", framealpha=0.9)
 
   ax_cost = fig.add_subplot(grid[:, 1])
   costmaps = msgs.get(f"/robot_{robot}/local_costmap/costmap", [])
   if costmaps:
-    m = costmaps[len(costmaps) // 2]
+    # The update with the most non-free cells: the moment the costmap has the most to show.
+    m = max(costmaps, key=lambda c: int(np.count_nonzero(np.asarray(c.msg["data"]) > 0)))
     local = ros.occupancy_grid_from_msg(m.msg)
     ext = render.grid_extent(local)
     ax_cost.set_facecolor("#cfe3f5")     # unknown cells (-1) are left transparent

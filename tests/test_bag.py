@@ -179,8 +179,9 @@ def test_bag_folder_checks(tmp_path):
   (tmp_path / "full" / "metadata.yaml").write_text("rosbag2_bagfile_information: {}")
   (tmp_path / "full" / "run_0.mcap").write_bytes(b"")
   assert bag_lib.check_bag_dir(tmp_path / "full", overwrite=True) == tmp_path / "full"
-  with pytest.raises(bag_lib.BagError, match="does not exist"):
-    bag_lib.check_bag_dir(tmp_path / "missing" / "bag")
+  assert bag_lib.check_bag_dir(tmp_path / "missing" / "bag") == tmp_path / "missing" / "bag"
+  with pytest.raises(bag_lib.BagError, match="is not a folder"):
+    bag_lib.check_bag_dir(tmp_path / "file" / "bag")
   (tmp_path / "empty").mkdir()
   assert bag_lib.check_bag_dir(tmp_path / "empty") == tmp_path / "empty"
 
@@ -217,7 +218,7 @@ def test_bag_picture_reads_the_bag(run, tmp_path):
     (["--bag", "{tmp}/full"], "folder is not empty"),
     (["--bag", "{tmp}/full", "--overwrite"], "other than a rosbag2"),
     (["--bag", "{tmp}/file"], "not a folder"),
-    (["--bag", "{tmp}/missing/b"], "does not exist"),
+    (["--bag", "{tmp}/file/b"], "is not a folder"),
     (["--bag", "{tmp}/b", "--devices", "1"], "--bag records on one device"),
 ])
 def test_fleet_bag_arguments_are_checked_before_simulating(tmp_path, capsys, extra, message):
