@@ -31,7 +31,9 @@ def test_wheel_installs_only_jaxfilters_and_sims():
 def test_extras_are_named_for_what_they_bring():
   project = PYPROJECT["project"]
   extras = project["optional-dependencies"]
-  assert set(extras) == {"test", "notebook", "ros", "rl", "warp"}
+  assert set(extras) == {"test", "notebook", "ros", "rl", "warp", "docs"}
+  assert {"mkdocs", "mkdocstrings"} <= _names(extras["docs"])
+  assert {"mcap", "mcap-ros2-support"} <= _names(extras["test"])     # tests/test_bag.py's independent readers
   assert {"ipykernel", "nbclient", "nbformat", "matplotlib"} <= _names(extras["notebook"])
   assert {"pytest", "hypothesis", "chex", "jaxfilters"} <= _names(extras["test"])   # jaxfilters[notebook]
   assert any("jaxfilters[notebook]" in r for r in extras["test"])
