@@ -151,12 +151,12 @@ def divisor_at_most(b, limit):
   return max(d for d in range(1, min(b, max(limit, 1)) + 1) if b % d == 0)
 
 
-def batched_inputs(costmap, mask, poses, mask_index, enabled, window, transform, where, state):
+def batched_inputs(costmap, mask, poses, mask_index, enabled, window, transform, where, state=None):
   """The public functions' inputs checked and batched: (idx, idx_ok, poses, enabled, window int32 [B, 4], transform).
 
   `where` names the caller in error messages. The window defaults to the whole map and is
-  clipped to it like LayeredCostmap does. `state` (a KeepoutState) must hold the
-  costmaps' B robots in every leaf.
+  clipped to it like LayeredCostmap does. `state` (a KeepoutState; None skips the
+  check) must hold the costmaps' B robots in every leaf.
 
   Raises:
     TypeError: state is not a KeepoutState (and the checks of `types.robot_inputs`).
@@ -164,11 +164,12 @@ def batched_inputs(costmap, mask, poses, mask_index, enabled, window, transform,
       window of the wrong shape or dtype, and the checks of `types.robot_inputs`.
   """
   check_costmap(costmap, where)
-  if not isinstance(state, KeepoutState):
-    raise TypeError(f"{where}: state must be a KeepoutState (KeepoutState.create); got {type(state).__name__}")
   b = costmap.num_robots
   h, w = costmap.cost.shape[1:]
-  check_state_batch(state, b, f"costmaps have {b} (cost {list(costmap.cost.shape)})")
+  if state is not None:
+    if not isinstance(state, KeepoutState):
+      raise TypeError(f"{where}: state must be a KeepoutState (KeepoutState.create); got {type(state).__name__}")
+    check_state_batch(state, b, f"costmaps have {b} (cost {list(costmap.cost.shape)})")
   idx, idx_ok, poses, enabled, transform = robot_inputs(mask, poses, b, mask_index, enabled, transform)
   if window is None:
     window = jnp.tile(jnp.asarray([0, 0, w, h], jnp.int32), (b, 1))
