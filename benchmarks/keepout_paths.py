@@ -13,6 +13,7 @@ import jax.numpy as jnp
 
 from jaxfilters import geometry
 from jaxfilters.keepout import common, other_frame, prologue, reference
+from jaxfilters import mask_lookup
 from jaxfilters.types import Costmap, FilterMask
 
 
@@ -29,7 +30,7 @@ def path_report(costmap: Costmap, mask: FilterMask, transform=None, mask_index=N
   def same_frame(origin, origin_lo, res, res_lo, i, ok, win, en):
     def one(origin, origin_lo, res, res_lo, i, ok, win, en):
       o, r = geometry.origin_terms(origin, origin_lo), geometry.resolution_terms(res, res_lo)
-      mo, mr = common.mask_origin_terms(mask, i), mask.resolution[i]
+      mo, mr = mask_lookup.mask_origin_terms(mask, i), mask.resolution[i]
       overlap, box, wknown = prologue.box_one((hm, wm), o, r, mo, mr, win)
       exact_overlap, exact_box, _ = prologue.box_one((hm, wm), o, r, mo, mr, win, exact=True)
       overlap, box = jax.tree.map(lambda e, f: jnp.where(wknown, f, e), (exact_overlap, exact_box), (overlap, box))
@@ -45,7 +46,7 @@ def path_report(costmap: Costmap, mask: FilterMask, transform=None, mask_index=N
     def one(origin, origin_lo, res, res_lo, i, win, tf):
       axes = reference.se2_axes_one(geometry.origin_terms(origin, origin_lo), geometry.resolution_terms(res, res_lo),
                                     tf, h, w)
-      code = other_frame.codes_one(axes, i, common.mask_origin_terms(mask, i), mask.resolution[i], (hm, wm), win,
+      code = other_frame.codes_one(axes, i, mask_lookup.mask_origin_terms(mask, i), mask.resolution[i], (hm, wm), win,
                                    True)
       return jnp.any(code == -2)
     return jax.vmap(one, in_axes=(*geo_axes, 0, 0, 0))(origin, origin_lo, res, res_lo, i, win, tf)

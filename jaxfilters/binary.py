@@ -113,7 +113,8 @@ def binary_filter(mask: FilterMask, poses, state: BinaryState, *, default_state=
   if not isinstance(state, BinaryState):
     raise TypeError(f"state must be a BinaryState (BinaryState.create); got {type(state).__name__}")
   b = state.binary_state.shape[0]
-  idx, idx_ok, poses, enabled, transform = robot_inputs(mask, poses, b, mask_index, enabled, transform)
+  idx, idx_ok, poses, enabled, transform = robot_inputs(mask, poses, b, mask_index, enabled, transform,
+                                                        state=state)
   if not isinstance(flip_threshold, jax.core.Tracer):
     validate.float32_values(flip_threshold, "flip_threshold", owner="binary_filter")
   ds = jnp.asarray(default_state)

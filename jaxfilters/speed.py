@@ -250,7 +250,7 @@ def speed_inputs(mask, poses, state, mask_index, enabled, transform):
   if not isinstance(state, SpeedState):
     raise TypeError(f"state must be a SpeedState (SpeedState.create); got {type(state).__name__}")
   b = state.speed_limit_prev.shape[0]
-  return (b, *robot_inputs(mask, poses, b, mask_index, enabled, transform))
+  return (b, *robot_inputs(mask, poses, b, mask_index, enabled, transform, state=state))
 
 
 def guard_index(new_state, out, state, ok):

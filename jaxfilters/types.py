@@ -517,8 +517,32 @@ def per_robot_bool(name: str, value: Any, num_robots: int, *, default: bool) -> 
   return jnp.broadcast_to(v, (b,))
 
 
+def check_state_batch(state: Any, num_robots: int, source: str) -> None:
+  """Static check that every leaf of a per-robot state (a pytree dataclass) leads with B robots.
+
+  A mismatch would otherwise surface as JAX's internal "vmap got inconsistent sizes".
+
+  Args:
+    state: the state (KeepoutState, SpeedState, ...); None leaves are skipped.
+    num_robots: B.
+    source: what says B, for the message (e.g. "costmaps have 4 (cost [4, 6, 6])").
+
+  Raises:
+    ValueError: a leaf whose leading size is not B, naming the leaf, its shape and `source`.
+  """
+  for f in dataclasses.fields(state):
+    leaf = getattr(state, f.name)
+    if leaf is None:
+      continue
+    shape = tuple(int(n) for n in getattr(leaf, "shape", ()))
+    if not shape or shape[0] != num_robots:
+      n = shape[0] if shape else "no"
+      raise ValueError(f"{type(state).__name__} has {n} robots ({f.name} {list(shape)}) but {source}; "
+                       f"build it with {type(state).__name__}.create for the same B")
+
+
 def robot_inputs(mask: FilterMask, poses: Any, num_robots: int, mask_index=None, enabled=None,
-                 transform=None):
+                 transform=None, *, state: Any = None):
   """Validates and broadcasts the per-robot inputs every filter takes.
 
   Args:
@@ -529,17 +553,27 @@ def robot_inputs(mask: FilterMask, poses: Any, num_robots: int, mask_index=None,
     enabled: None (all enabled), a bool scalar, or bool [B].
     transform: None (mask in the costmap frame), or T_mask_from_global
       (x, y, yaw) as [3] or [B, 3].
+    state: optional per-robot state whose first leaf gave B; its leaves and
+      the poses are checked against it (`check_state_batch`).
 
   Returns:
     (mask index int32 [B], index in range bool [B] (see resolve_mask_index),
     poses float32 [B, 3], enabled bool [B], transform float32 [B, 3] or None).
 
   Raises:
-    ValueError: any of them with the wrong shape or dtype, or (eager) a
-      mask_index outside [0, M).
+    ValueError: any of them with the wrong shape or dtype, a state or poses
+      whose batch is not B (naming both sizes), or (eager) a mask_index
+      outside [0, M).
     TypeError: mask is not a FilterMask.
   """
   b = num_robots
+  if state is not None:
+    first = dataclasses.fields(state)[0].name
+    lead = f"{type(state).__name__} has {b} robots ({first} {list(getattr(state, first).shape)})"
+    p_shape = tuple(int(n) for n in jnp.shape(poses))
+    if len(p_shape) == 2 and p_shape[0] != b:
+      raise ValueError(f"{lead} but poses have {p_shape[0]} (poses {list(p_shape)})")
+    check_state_batch(state, b, f"{first} has {b}")
   check_mask(mask, "filter input")
   idx, idx_ok = resolve_mask_index(mask, mask_index, b)
   poses = check_poses(poses, b)

@@ -191,7 +191,8 @@ def zone_filter(mask: FilterMask, poses, state: ZoneState, table: ZoneTable, *, 
   if not isinstance(table, ZoneTable):
     raise TypeError(f"table must be a ZoneTable (ZoneTable.create); got {type(table).__name__}")
   b = state.current.shape[0]
-  idx, idx_ok, poses, enabled, transform = robot_inputs(mask, poses, b, mask_index, enabled, transform)
+  idx, idx_ok, poses, enabled, transform = robot_inputs(mask, poses, b, mask_index, enabled, transform,
+                                                        state=state)
   if state.params.shape[1:] != table.nominal.shape:
     raise ValueError(f"ZoneState has {state.params.shape[1:]} parameters but the table has "
                      f"{table.nominal.shape}; build the state with ZoneState.create(table, B)")

@@ -26,6 +26,7 @@ from jaxfilters import geometry
 from jaxfilters import keepout as ko
 from jaxfilters.keepout import common, other_frame, other_resolution, process, prologue, same_frame
 from jaxfilters.keepout import reference as keepout_reference
+from jaxfilters import mask_lookup
 from jaxfilters import validate
 from reference import nav2 as reference
 from tests.keepout_fleets import B, H, HM, M, W, WM, fleet
@@ -283,7 +284,7 @@ def test_edge_fleet_really_has_undecided_cells():
   axes = keepout_reference.se2_axes_one(geometry.origin_terms(cm.origin[0], lo(cm.origin_lo)),
                           geometry.resolution_terms(cm.resolution[0], lo(cm.resolution_lo)), jnp.asarray(tf[0]), H, W)
   px, py = keepout_reference.se2_grid(axes)
-  _, _, certain = geometry.world_to_index_checked(px, py, common.mask_origin_terms(mask, 0), mask.resolution[0], WM, HM)
+  _, _, certain = geometry.world_to_index_checked(px, py, mask_lookup.mask_origin_terms(mask, 0), mask.resolution[0], WM, HM)
   assert not bool(jnp.all(certain))
 
 
@@ -471,7 +472,7 @@ def _exact_vectors(cm, mask, idx, ok, win, en):
 
   def one(origin, origin_lo, res, res_lo, i, ok, win, en):
     o, r = geometry.origin_terms(origin, origin_lo), geometry.resolution_terms(res, res_lo)
-    mo, mr = common.mask_origin_terms(mask, i), mask.resolution[i]
+    mo, mr = mask_lookup.mask_origin_terms(mask, i), mask.resolution[i]
     cells = prologue.exact_axis_cells((h, w), o, r, mo, mr, (hm, wm))
     overlap, box, _ = prologue.box_one((hm, wm), o, r, mo, mr, win, exact=True)
     return cells, common.window_flags(w, h, *box, en & overlap & ok)

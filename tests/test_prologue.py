@@ -28,6 +28,7 @@ from jaxfilters import geometry
 from jaxfilters import keepout as ko
 from jaxfilters.keepout import PallasTuning, common, process, prologue, same_frame
 from jaxfilters.keepout import pallas as kp
+from jaxfilters import mask_lookup
 from benchmarks.keepout_paths import path_report
 from tests import keepout_fleets
 from tests.keepout_fleets import H, HM, M, W, WM
@@ -106,7 +107,7 @@ def _geometry(cm, mask, r, i):
   lo = lambda a: None if a is None else a[r]
   o = geometry.origin_terms(cm.origin[r], lo(cm.origin_lo))
   res = geometry.resolution_terms(cm.resolution[r], lo(cm.resolution_lo))
-  return o, res, common.mask_origin_terms(mask, i), mask.resolution[i]
+  return o, res, mask_lookup.mask_origin_terms(mask, i), mask.resolution[i]
 
 
 def _reference_cells(o, res, mo, mres, axis, n):

@@ -23,8 +23,9 @@ import numpy as np
 from jaxfilters import constants
 from jaxfilters import footprint as footprint_lib
 from jaxfilters import geometry
-from jaxfilters.keepout.common import batched_inputs, fill_error, with_error
+from jaxfilters.keepout.common import batched_inputs, fill_error, usable_geometry, with_error
 from jaxfilters.keepout.config import EMPTY_BOX, KeepoutConfig, KeepoutState, occ_to_cost
+from jaxfilters.mask_lookup import mask_cell
 from jaxfilters.types import Costmap, FilterMask, per_robot_bool
 
 _F32 = jnp.float32
@@ -32,6 +33,9 @@ _F32 = jnp.float32
 
 def pose_in_lethal_zone_one(data, mask_origin, mask_res, xy, mask_origin_lo=None):
   """Nav2's robot-in-keepout test (docs/nav2_semantics.md §4.2): the point's mask cell costs 253 or 254.
+
+  The cell is the one every mask reader uses (`mask_lookup.mask_cell`, the exact
+  float64 origin parts).
 
   Unknown mask cells (cost 255, data -1) are not lethal: a robot standing on
   one does not switch escape mode on.
@@ -44,10 +48,9 @@ def pose_in_lethal_zone_one(data, mask_origin, mask_res, xy, mask_origin_lo=None
   Returns:
     bool []: False off the mask.
   """
-  h, w = data.shape
-  mx, my, valid = geometry.world_to_cell(xy[0], xy[1], mask_origin, mask_res, w, h, mask_origin_lo)
-  cost = occ_to_cost(data[my, mx])
-  return valid & (cost >= constants.INSCRIBED_INFLATED_OBSTACLE) & (cost <= constants.LETHAL_OBSTACLE)
+  d, inside = mask_cell(data, geometry.origin_terms(mask_origin, mask_origin_lo), mask_res, xy)
+  cost = occ_to_cost(d)
+  return inside & (cost >= constants.INSCRIBED_INFLATED_OBSTACLE) & (cost <= constants.LETHAL_OBSTACLE)
 
 
 def keepout_update_bounds_one(state, data, mask_origin, mask_res, pose, bounds,
@@ -132,21 +135,24 @@ def keepout_update_bounds(costmap: Costmap, mask: FilterMask, poses, state: Keep
     new_mask: optional bool [B] or scalar, a new mask arrived since last cycle.
 
   Returns:
-    (new KeepoutState, new bounds float32 [B, 4]). With
-    `config.robot_in_zone == "footprint"`, `is_pose_lethal` comes from the
-    footprint test (jaxfilters/footprint.py) and `error` is also set for a
-    robot whose mask is finer than `config.min_mask_resolution` (traced masks;
-    a concrete one raises).
+    (new KeepoutState, new bounds float32 [B, 4]). `KeepoutState.error` [B] is
+    True, as in keepout_filter, for a robot with a traced mask_index outside
+    [0, M) or an unusable traced mask or costmap geometry; that robot's state
+    and bounds are returned unchanged. With `config.robot_in_zone == "footprint"`,
+    `is_pose_lethal` comes from the footprint test (jaxfilters/footprint.py) and
+    `error` is also set for a robot whose mask is finer than
+    `config.min_mask_resolution` (traced masks; a concrete one raises).
 
   Raises:
-    TypeError / ValueError: as keepout_filter; a concrete mask finer than
-      `config.min_mask_resolution` in "footprint" mode.
+    TypeError / ValueError: as keepout_filter (a state, poses or per-robot array
+      whose batch is not the costmaps' B included); bounds not [B, 4]; a concrete
+      mask finer than `config.min_mask_resolution` in "footprint" mode.
   """
   if not isinstance(config, KeepoutConfig):
     raise TypeError(f"config must be a KeepoutConfig; got {type(config).__name__}")
   b = costmap.num_robots
   idx, idx_ok, poses, enabled, _, transform = batched_inputs(
-      costmap, mask, poses, mask_index, enabled, None, transform, "keepout_update_bounds")
+      costmap, mask, poses, mask_index, enabled, None, transform, "keepout_update_bounds", state)
   bounds = jnp.asarray(bounds, _F32)
   if bounds.shape != (b, 4):
     raise ValueError(f"bounds must be float [B, 4] = ({b}, 4); got {tuple(bounds.shape)}")
@@ -173,6 +179,8 @@ def _check_footprint_window(mask: FilterMask, config: KeepoutConfig) -> None:
 def _update_bounds_jit(costmap, mask, idx, idx_ok, poses, state, bounds, new_mask, enabled, transform, *,
                        override_lethal_cost, footprint=None):
   with jax.named_scope("keepout_update_bounds"):
+    costmap, mask, idx_ok = usable_geometry(costmap, mask, idx, idx_ok)
+
     def one(st, i, ok, pose, bnd, origin, res, nm, en, tf):
       return keepout_update_bounds_one(
           st, mask.data[i], mask.origin[i], mask.resolution[i], pose, bnd, origin, res, nm, en, tf,

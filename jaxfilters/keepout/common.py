@@ -12,9 +12,9 @@ import dataclasses
 import jax
 import jax.numpy as jnp
 
-from jaxfilters import geometry
 from jaxfilters.keepout.config import KeepoutConfig, KeepoutState, mask_cost_plus_one_table
-from jaxfilters.types import Costmap, FilterMask, check_costmap, robot_inputs
+from jaxfilters.types import (Costmap, FilterMask, check_costmap, check_state_batch, costmap_geometry_ok,
+                              mask_geometry_ok, robot_inputs)
 
 _COST1 = mask_cost_plus_one_table()
 
@@ -69,9 +69,39 @@ def robot_geometry(costmap: Costmap, mask: FilterMask):
   return (costmap.origin, costmap.origin_lo, costmap.resolution, costmap.resolution_lo)
 
 
-def mask_origin_terms(mask: FilterMask, i):
-  """Mask i's origin as float32 parts (`geometry.origin_terms`)."""
-  return geometry.origin_terms(mask.origin[i], None if mask.origin_lo is None else mask.origin_lo[i])
+def usable_geometry(costmap: Costmap, mask: FilterMask, idx, idx_ok):
+  """The robots whose mask and costmap geometry can be used, and that geometry made safe to compute with.
+
+  A traced resolution or origin can be anything (NaN, inf, a negative, zero or
+  subnormal resolution; `types.mask_geometry_ok`, `types.costmap_geometry_ok`). A
+  robot on such a mask or costmap is treated as one with an out-of-range mask
+  index: nothing is written, its state is kept and `error` is set. Its geometry
+  is replaced by resolution 1 and origin 0 so that no kernel (window sizes, loop
+  counts, Pallas grids) computes from the garbage values; the replaced values are
+  never written anywhere, since the robot does not run.
+
+  Args:
+    costmap, mask: as keepout_filter. idx int32 [B], idx_ok bool [B] (index in range).
+
+  Returns:
+    (costmap, mask, idx_ok & both geometries usable).
+  """
+  mask_ok = mask_geometry_ok(mask)
+  cm_ok = costmap_geometry_ok(costmap)
+  ok = idx_ok & mask_ok[idx] & cm_ok
+
+  def safe(x, good, fill):
+    if x is None:
+      return None
+    return jnp.where(good.reshape(good.shape + (1,) * (x.ndim - 1)), x, jnp.asarray(fill, x.dtype))
+
+  mask = dataclasses.replace(mask, resolution=safe(mask.resolution, mask_ok, 1.0),
+                             origin=safe(mask.origin, mask_ok, 0.0), origin_lo=safe(mask.origin_lo, mask_ok, 0.0))
+  costmap = dataclasses.replace(costmap, resolution=safe(costmap.resolution, cm_ok, 1.0),
+                                resolution_lo=safe(costmap.resolution_lo, cm_ok, 0.0),
+                                origin=safe(costmap.origin, cm_ok, 0.0),
+                                origin_lo=safe(costmap.origin_lo, cm_ok, 0.0))
+  return costmap, mask, ok
 
 
 def tree_where(pick, a, b):
@@ -121,15 +151,25 @@ def divisor_at_most(b, limit):
   return max(d for d in range(1, min(b, max(limit, 1)) + 1) if b % d == 0)
 
 
-def batched_inputs(costmap, mask, poses, mask_index, enabled, window, transform, where):
+def batched_inputs(costmap, mask, poses, mask_index, enabled, window, transform, where, state=None):
   """The public functions' inputs checked and batched: (idx, idx_ok, poses, enabled, window int32 [B, 4], transform).
 
   `where` names the caller in error messages. The window defaults to the whole map and is
-  clipped to it like LayeredCostmap does.
+  clipped to it like LayeredCostmap does. `state` (a KeepoutState; None skips the
+  check) must hold the costmaps' B robots in every leaf.
+
+  Raises:
+    TypeError: state is not a KeepoutState (and the checks of `types.robot_inputs`).
+    ValueError: a state leaf whose batch is not the costmaps' (naming both sizes), a
+      window of the wrong shape or dtype, and the checks of `types.robot_inputs`.
   """
   check_costmap(costmap, where)
   b = costmap.num_robots
   h, w = costmap.cost.shape[1:]
+  if state is not None:
+    if not isinstance(state, KeepoutState):
+      raise TypeError(f"{where}: state must be a KeepoutState (KeepoutState.create); got {type(state).__name__}")
+    check_state_batch(state, b, f"costmaps have {b} (cost {list(costmap.cost.shape)})")
   idx, idx_ok, poses, enabled, transform = robot_inputs(mask, poses, b, mask_index, enabled, transform)
   if window is None:
     window = jnp.tile(jnp.asarray([0, 0, w, h], jnp.int32), (b, 1))

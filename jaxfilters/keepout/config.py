@@ -125,8 +125,10 @@ class KeepoutState:
     acc_box: float32 [B, 4] world (min_x, min_y, max_x, max_y) accumulated while
       the robot is in a zone; (+inf, +inf, -inf, -inf) when empty.
     error: bool [B], the last call could not run for this robot because its
-      traced `mask_index` was outside [0, M): nothing was written and the
-      rest of its state was kept. After `keepout_update_bounds` with a
+      traced `mask_index` was outside [0, M) or its mask's or costmap's traced
+      geometry was unusable (`types.mask_geometry_ok`,
+      `types.costmap_geometry_ok`): nothing was written and the rest of its
+      state was kept. After `keepout_update_bounds` with a
       "footprint" KeepoutConfig it is also True where the mask is finer than
       `min_mask_resolution` (the footprint test saw only its window).
       None in a hand-built state.

@@ -26,8 +26,9 @@ import jax
 import jax.numpy as jnp
 
 from jaxfilters import geometry
-from jaxfilters.keepout.common import (divisor_at_most, m1_rule_u8, m1_table, mask_origin_terms, processed, rerun,
+from jaxfilters.keepout.common import (divisor_at_most, m1_rule_u8, m1_table, processed, rerun,
                                        robot_geometry, window_flags, with_error, write_u8)
+from jaxfilters.mask_lookup import mask_origin_terms
 from jaxfilters.keepout.config import KeepoutConfig
 from jaxfilters.keepout.packed import pack, unpack, word, write_rule
 from jaxfilters.keepout.reference import keepout_stack_one, se2_axes_one, se2_grid

@@ -9,8 +9,10 @@ the fast paths' float32 index arithmetic. Every path gives the exact path's inte
 
 `keepout_filter` is jitted at the edge: an eager call compiles once per shape and
 config, and inside a caller's `jit` it inlines. A robot whose traced `mask_index` is
-outside [0, M) is left untouched and gets `KeepoutState.error` True (an eager call
-raises instead).
+outside [0, M) (an eager call raises instead), or whose mask or costmap geometry is
+unusable (a traced NaN, inf, negative, zero or subnormal resolution, a non-finite
+origin: `types.mask_geometry_ok`, `types.costmap_geometry_ok`), is left untouched and
+gets `KeepoutState.error` True.
 """
 
 from __future__ import annotations
@@ -21,7 +23,7 @@ import functools
 import jax
 
 from jaxfilters.keepout import pallas
-from jaxfilters.keepout.common import batched_inputs, fill_error
+from jaxfilters.keepout.common import batched_inputs, fill_error, usable_geometry
 from jaxfilters.keepout.config import KeepoutConfig, KeepoutState
 from jaxfilters.keepout.other_frame import other_frame_batch
 from jaxfilters.keepout.reference import general_batch
@@ -54,11 +56,21 @@ def keepout_filter(costmap: Costmap, mask: FilterMask, poses, state: KeepoutStat
     config: static KeepoutConfig.
 
   Returns:
-    (Costmap with the new cost, new KeepoutState).
+    (Costmap with the new cost, new KeepoutState). `KeepoutState.error` [B] is
+    True for a robot the call could not run for: a traced mask_index outside
+    [0, M), or a mask or costmap whose traced geometry is unusable (resolution
+    NaN, inf, <= 0 or subnormal, origin not finite; `types.mask_geometry_ok`,
+    `types.costmap_geometry_ok`). That robot's costmap and the rest of its state
+    are returned unchanged; it is False for every robot that ran (a disabled
+    robot included).
 
   Raises:
     TypeError / ValueError: inputs of the wrong type, dtype or shape (e.g. a
-      Costmap whose cost is not uint8), or a concrete mask_index out of range.
+      Costmap whose cost is not uint8, a state that is not a KeepoutState), or a
+      concrete mask_index out of range.
+    ValueError: a KeepoutState, poses, mask_index, enabled, window or transform
+      whose batch is not the costmaps' B (the message names the array and both
+      sizes), at trace time.
     ValueError: `config.kernel="pallas"` on a backend other than GPU without
       `PallasTuning(interpret=True)`.
   """
@@ -66,7 +78,7 @@ def keepout_filter(costmap: Costmap, mask: FilterMask, poses, state: KeepoutStat
     raise TypeError(f"config must be a KeepoutConfig; got {type(config).__name__}")
   pallas.use_pallas(config.kernel, config.pallas)   # kernel="pallas" off GPU raises here
   idx, idx_ok, poses, enabled, window, transform = batched_inputs(
-      costmap, mask, poses, mask_index, enabled, window, transform, "keepout_filter")
+      costmap, mask, poses, mask_index, enabled, window, transform, "keepout_filter", state)
   del poses
   _check_index_range(costmap, mask)
   state = fill_error(state, costmap.num_robots)
@@ -107,7 +119,8 @@ def filter_batch(costmap, mask, idx, idx_ok, state, window, enabled, transform, 
 
   Args:
     costmap, mask: as keepout_filter. idx int32 [B], idx_ok bool [B]: each robot's mask
-      and whether it is in range. state: KeepoutState [B] with `error`. window int32
+      and whether it is in range (a robot whose mask or costmap geometry is unusable is
+      also left out here: `common.usable_geometry`). state: KeepoutState [B] with `error`. window int32
       [B, 4], enabled bool [B], transform float32 [B, 3] or None.
     config: static KeepoutConfig.
     exact: static; run only the exact per-cell path (the reference the tests compare
@@ -120,6 +133,8 @@ def filter_batch(costmap, mask, idx, idx_ok, state, window, enabled, transform, 
     (Costmap with the new cost, new KeepoutState).
   """
   with jax.named_scope("keepout_filter"):
+    out_costmap = costmap
+    costmap, mask, idx_ok = usable_geometry(costmap, mask, idx, idx_ok)
     if loop == "auto":
       loop = "map" if jax.default_backend() == "cpu" else "vmap"
     hm, wm = mask.data.shape[1:]
@@ -132,4 +147,4 @@ def filter_batch(costmap, mask, idx, idx_ok, state, window, enabled, transform, 
     else:
       cost, new_state = other_frame_batch(costmap, mask, idx, idx_ok, state, window, enabled, transform,
                                           config=config, loop=loop)
-    return dataclasses.replace(costmap, cost=cost), new_state
+    return dataclasses.replace(out_costmap, cost=cost), new_state

@@ -30,7 +30,8 @@ import jax
 import jax.numpy as jnp
 
 from jaxfilters import geometry
-from jaxfilters.keepout.common import mask_origin_terms, rerun_capacity, rerun_if_any, robot_geometry
+from jaxfilters.keepout.common import rerun_capacity, rerun_if_any, robot_geometry
+from jaxfilters.mask_lookup import mask_origin_terms
 from jaxfilters.keepout.reference import same_frame_window
 
 _F32 = jnp.float32

@@ -20,7 +20,8 @@ import jax.numpy as jnp
 
 from jaxfilters import constants
 from jaxfilters import geometry
-from jaxfilters.keepout.common import mask_origin_terms, processed, robot_geometry, with_error
+from jaxfilters.keepout.common import processed, robot_geometry, with_error
+from jaxfilters.mask_lookup import mask_origin_terms
 from jaxfilters.keepout.config import KeepoutConfig, occ_to_cost
 
 _F32 = jnp.float32
