@@ -10,6 +10,7 @@ ValueError naming both sizes at trace time.
 from __future__ import annotations
 
 import dataclasses
+import functools
 
 import jax
 import jax.numpy as jnp
@@ -64,30 +65,32 @@ def _check_robot_1_untouched(cost, state):
   np.testing.assert_array_equal(np.asarray(state.error), [False, True, False])
 
 
-@pytest.mark.parametrize("path, res", [(p, r) for p in PATHS for r in (PALLAS_RES if p == "pallas" else BAD_RES)])
-def test_traced_bad_mask_resolution_is_masked_and_flagged(path, res):
+@functools.cache
+def _filter_runner(path):
+  """One jitted program per path: mask 1's resolution and origin x are its traced arguments, so every
+  bad value of a path runs through the same compiled program."""
   p = PATHS[path]
   mask = _stack(p["mask_res"])
 
   @jax.jit
-  def run(r):
-    return jf.keepout_filter(_costmap(), _bad_mask(mask, res=r), POSES, jf.KeepoutState.create(3),
+  def run(r, ox):
+    return jf.keepout_filter(_costmap(), _bad_mask(mask, res=r, ox=ox), POSES, jf.KeepoutState.create(3),
                              mask_index=IDX, **p["kw"])
-  cm, state = run(jnp.float32(res))
+  return run, p["mask_res"]
+
+
+@pytest.mark.parametrize("path, res", [(p, r) for p in PATHS for r in (PALLAS_RES if p == "pallas" else BAD_RES)])
+def test_traced_bad_mask_resolution_is_masked_and_flagged(path, res):
+  run, _ = _filter_runner(path)
+  cm, state = run(jnp.float32(res), jnp.float32(0.0))
   _check_robot_1_untouched(cm.cost, state)
 
 
 @pytest.mark.parametrize("path", ["same_frame", "other_frame"])
 @pytest.mark.parametrize("ox", BAD_ORIGIN)
 def test_traced_bad_mask_origin_is_masked_and_flagged(path, ox):
-  p = PATHS[path]
-  mask = _stack(p["mask_res"])
-
-  @jax.jit
-  def run(o):
-    return jf.keepout_filter(_costmap(), _bad_mask(mask, ox=o), POSES, jf.KeepoutState.create(3),
-                             mask_index=IDX, **p["kw"])
-  cm, state = run(jnp.float32(ox))
+  run, mask_res = _filter_runner(path)
+  cm, state = run(jnp.float32(mask_res), jnp.float32(ox))
   _check_robot_1_untouched(cm.cost, state)
 
 
@@ -103,36 +106,46 @@ def test_exact_reference_path_masks_bad_geometry(res):
   _check_robot_1_untouched(out.cost, st)
 
 
+@jax.jit
+def _run_bad_costmap(r, ox):
+  cm = _costmap()
+  cm = dataclasses.replace(cm, resolution=cm.resolution.at[1].set(r), origin=cm.origin.at[1, 0].set(ox))
+  return jf.keepout_filter(cm, _stack(), POSES, jf.KeepoutState.create(3), mask_index=np.zeros(3, np.int32))
+
+
 @pytest.mark.parametrize("res", BAD_RES)
 def test_traced_bad_costmap_geometry_is_masked_and_flagged(res):
-  mask = _stack()
-
-  @jax.jit
-  def run(r, ox):
-    cm = _costmap()
-    cm = dataclasses.replace(cm, resolution=cm.resolution.at[1].set(r), origin=cm.origin.at[1, 0].set(ox))
-    return jf.keepout_filter(cm, mask, POSES, jf.KeepoutState.create(3), mask_index=np.zeros(3, np.int32))
+  run = _run_bad_costmap
   cm, state = run(jnp.float32(res), jnp.float32(0.0))
   _check_robot_1_untouched(cm.cost, state)
   cm, state = run(jnp.float32(1.0), jnp.float32(np.nan))
   _check_robot_1_untouched(cm.cost, state)
 
 
-@pytest.mark.parametrize("res", BAD_RES)
-@pytest.mark.parametrize("robot_in_zone", ["center", "footprint"])
-def test_update_bounds_with_bad_traced_mask_geometry_is_untouched_and_flagged(res, robot_in_zone):
+BOUNDS = np.tile(np.array([1.0, 1.0, 2.0, 2.0], np.float32), (3, 1))
+
+
+@functools.cache
+def _bounds_runner(robot_in_zone):
+  """One jitted updateBounds per zone test; mask 1's resolution is the traced argument."""
   mask = _stack()
   config = KeepoutConfig(override_lethal_cost=True)
   if robot_in_zone == "footprint":
     config = KeepoutConfig(override_lethal_cost=True, robot_in_zone="footprint", robot_radius=0.3,
                            min_mask_resolution=0.5)
-  bounds = np.tile(np.array([1.0, 1.0, 2.0, 2.0], np.float32), (3, 1))
 
   @jax.jit
   def run(r):
     return jf.keepout_update_bounds(_costmap(), _bad_mask(mask, res=r), POSES, jf.KeepoutState.create(3),
-                                    bounds, mask_index=IDX, config=config)
-  state, out = run(jnp.float32(res))
+                                    BOUNDS, mask_index=IDX, config=config)
+  return run
+
+
+@pytest.mark.parametrize("res", BAD_RES)
+@pytest.mark.parametrize("robot_in_zone", ["center", "footprint"])
+def test_update_bounds_with_bad_traced_mask_geometry_is_untouched_and_flagged(res, robot_in_zone):
+  bounds = BOUNDS
+  state, out = _bounds_runner(robot_in_zone)(jnp.float32(res))
   np.testing.assert_array_equal(np.asarray(state.error), [False, True, False])
   np.testing.assert_array_equal(np.asarray(state.is_pose_lethal), [True, False, True])
   np.testing.assert_array_equal(np.asarray(out[1]), bounds[1])
