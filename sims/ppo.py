@@ -91,23 +91,33 @@ class GymnaxAdapter:
   def default_params(self) -> AdapterParams:
     return AdapterParams(max_steps_in_episode=self.episode_length)
 
+  def _axes(self, base):
+    """in_axes of the randomization_fn, flattened alongside `base` (None subtrees of the model
+    count as leaves in both, so the two lists line up even where mjx.Model has None fields)."""
+    _, in_axes = self.randomization_fn(base, rng=jnp.zeros((1, 2), jnp.uint32))
+    is_none = lambda x: x is None
+    axes = jax.tree.leaves(in_axes, is_leaf=is_none)
+    leaves, treedef = jax.tree.flatten(base, is_leaf=is_none)
+    if len(axes) != len(leaves):
+      raise ValueError(f"randomization_fn returned in_axes with {len(axes)} leaves for a model with "
+                       f"{len(leaves)}: in_axes must mirror the model's structure")
+    return axes, leaves, treedef
+
   def _leaves(self, key):
     """The randomised leaves of one env's model (list; empty without a randomization_fn)."""
     if self.randomization_fn is None:
       return []
     base = self.env.unwrapped._mjx_model
-    model_v, in_axes = self.randomization_fn(base, rng=key[None])
-    axes = jax.tree.leaves(in_axes, is_leaf=lambda x: x is None)
-    leaves = jax.tree.leaves(model_v)
+    axes, _, _ = self._axes(base)
+    model_v, _ = self.randomization_fn(base, rng=key[None])
+    leaves = jax.tree.leaves(model_v, is_leaf=lambda x: x is None)
     return [jnp.take(x, 0, axis=ax) for x, ax in zip(leaves, axes) if ax is not None]
 
   def _model(self, model_leaves):
     base = self.env.unwrapped._mjx_model
     if self.randomization_fn is None:
       return base
-    _, in_axes = self.randomization_fn(base, rng=jnp.zeros((1, 2), jnp.uint32))
-    axes = jax.tree.leaves(in_axes, is_leaf=lambda x: x is None)
-    leaves, treedef = jax.tree.flatten(base)
+    axes, leaves, treedef = self._axes(base)
     it = iter(model_leaves)
     return jax.tree.unflatten(treedef, [x if ax is None else next(it) for x, ax in zip(leaves, axes)])
 

@@ -296,3 +296,20 @@ def test_soak_short():
   assert report["env_steps"] == 2 * 2 * 4 and len(report["memory"]) == 4
   assert report["memory_kind"] in ("bytes_in_use", "live_arrays")
   assert report["keepout_entries"] == 0 and report["nan"] == 0 and report["speed_compliant"]
+
+
+def test_adapter_randomises_each_env_model():
+  # The adapter once paired the randomised leaves with the wrong model fields (mjx.Model's None
+  # fields shifted the flattened lists): `train_ppo --randomize` stopped at the first reset.
+  from sims.ppo import GymnaxAdapter
+  env = NavEnv.create()
+  adapter = GymnaxAdapter(env, episode_length=4, randomization_fn=randomize_zones_and_goals)
+  reset = jax.jit(jax.vmap(adapter.reset))
+  obs, st = reset(jax.random.split(jax.random.PRNGKey(3), 3))
+  assert obs.shape == (3, env.observation_size) and bool(jnp.all(jnp.isfinite(obs)))
+  models = [adapter._model(jax.tree.map(lambda x: x[i], st.model_leaves)) for i in range(3)]
+  mults = [float(m.task.world.speed.info.multiplier[0]) for m in models]
+  assert len(set(mults)) == 3
+  base = env.mjx_model
+  assert models[0].task.world.speed.data.shape == base.task.world.speed.data.shape
+  assert models[0].task.world.speed.resolution.shape == base.task.world.speed.resolution.shape
