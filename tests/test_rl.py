@@ -307,7 +307,7 @@ def test_adapter_randomises_each_env_model():
   reset = jax.jit(jax.vmap(adapter.reset))
   obs, st = reset(jax.random.split(jax.random.PRNGKey(3), 3))
   assert obs.shape == (3, env.observation_size) and bool(jnp.all(jnp.isfinite(obs)))
-  models = [adapter._model(jax.tree.map(lambda x: x[i], st.model_leaves)) for i in range(3)]
+  models = [adapter.model_for(jax.tree.map(lambda x: x[i], st.model_leaves)) for i in range(3)]
   mults = [float(m.task.world.speed.info.multiplier[0]) for m in models]
   assert len(set(mults)) == 3
   base = env.mjx_model
