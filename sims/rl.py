@@ -91,6 +91,7 @@ from sims import navigation, planner
 from sims.config import FleetConfig, RobotConfig
 from sims.env import ROBOT_XML, FleetEnv, WorldState, mjx_step
 from sims.scenario import Scenario
+from sims.layouts import LayoutBank, LayoutConfig, bank_from_worlds, layout_worlds
 from sims.world import STATIC_LAYER, WorldParams
 
 _F32 = jnp.float32
@@ -123,6 +124,9 @@ class NavEnvConfig:
       motion (teaches braking before
       a slower zone, where the reactive filter can only clip one controller tick late).
     time_penalty: reward subtracted per env step.
+    goal_max_distance: m of navigation-field distance: a new goal is drawn among the stations
+      at most this far from the robot (and more than 2 m away in a straight line), so every goal
+      is reachable within an episode; 0 draws from every station.
   """
   mode: str = "velocity"
   keepout: str = "terminate"
@@ -136,6 +140,7 @@ class NavEnvConfig:
   clip_penalty: float = 2.0
   approach_penalty: float = 20.0
   time_penalty: float = 0.01
+  goal_max_distance: float = 10.0
 
   def __post_init__(self):
     if self.mode not in MODES:
@@ -166,13 +171,22 @@ class NavTask:
   """The task data every step reads (all traced leaves; randomisable per env).
 
   Attributes:
-    world: WorldParams (maps, masks, navigation field, stations, spawns).
+    world: WorldParams of the scenario (navigation mode drives the fleet on it).
     static_inflated: uint8 [H, W], the static layer inflated (no keepout), on the map grid.
-    goal_logits: float32 [S], log-weights of drawing each station as a goal (-inf never).
+    goal_logits: float32 [L * S], log-weights of drawing each station of the bank as a goal
+      (-inf never; `randomize_zones_and_goals` leaves only the env's layout finite).
+    bank: LayoutBank of L zone layouts (L = 1: the scenario's own zones); velocity mode reads
+      its masks, navigation fields, stations and spawns.
+    layout: int32 [], the bank layout this env drives in (randomised per env).
+    navigation_mode: static; True when the env runs in navigation mode (it reads `world`'s
+      zones, velocity mode reads `bank`'s).
   """
   world: WorldParams
   static_inflated: jax.Array
   goal_logits: jax.Array
+  bank: LayoutBank
+  layout: jax.Array
+  navigation_mode: bool = dataclasses.field(default=False, metadata={"static": True})
 
   def replace(self, **changes) -> "NavTask":
     """dataclasses.replace (what `mjx.Model.tree_replace` calls on nested fields)."""
@@ -228,18 +242,35 @@ def _rotate(c, s, x, y):
   return c * x - s * y, s * x + c * y
 
 
-def _mps_cap(p: WorldParams, xy: jax.Array, max_speed: float) -> jax.Array:
-  """Speed limit of the mask at points xy [..., 2] in m/s (+inf: none, off-mask or unknown)."""
-  limit, pct, valid = speed_limit_at(p.speed, xy)
+def _layout_index(task: NavTask, lead: tuple[int, ...]) -> jax.Array:
+  """The env's layout as a mask_index of the points' leading shape."""
+  return jnp.broadcast_to(task.layout.astype(jnp.int32), lead)
+
+
+def _mps_cap(task: NavTask, xy: jax.Array, max_speed: float) -> jax.Array:
+  """Speed limit of the env's speed mask at points xy [..., 2] in m/s (+inf: none, off-mask or unknown)."""
+  limit, pct, valid = speed_limit_at(task.bank.speed, xy, mask_index=_layout_index(task, xy.shape[:-1]))
   return planner.limit_to_speed(limit, pct, valid, max_speed)
 
 
-def _sample_goal(key, logits, xy, current, stations):
-  """A station per robot from the goal distribution, not the current one, > 2 m away if possible."""
+def _keepout_cost(task: NavTask, xy: jax.Array) -> jax.Array:
+  """Keepout filter cost of the env's keepout mask at points xy [..., 2] (uint8; NO_INFORMATION off it)."""
+  return keepout_cost_at(task.bank.keepout, xy, mask_index=_layout_index(task, xy.shape[:-1]))
+
+
+def _sample_goal(key, logits, xy, current, nav: navigation.NavField, max_dist: float):
+  """A station per robot from the goal distribution: not the current one, > 2 m away in a straight
+  line and within `max_dist` m of navigation distance (0: any) if possible, else relaxing those."""
   k = xy.shape[0]
+  stations = nav.stations
   s = stations.shape[0]
   ids = jnp.arange(s, dtype=jnp.int32)
   far = jnp.linalg.norm(stations[None] - xy[:, None], axis=-1) > 2.0
+  if max_dist > 0:
+    active = jnp.isfinite(logits)
+    near = jax.vmap(lambda q: jax.vmap(lambda g: jnp.where(
+        active[g], navigation.nav_value(nav, g, q), jnp.inf))(ids))(xy) <= max_dist   # [K, S]
+    far = far & near
   other = ids[None, :] != current[:, None]
   base = jnp.broadcast_to(logits[None, :], (k, s))
   pick = jnp.where(far & other, base, -jnp.inf)
@@ -259,32 +290,50 @@ class NavEnv(mjx_env.MjxEnv):
   `wrap_for_brax_training`.
   """
 
-  def __init__(self, fleet: FleetEnv, config: NavEnvConfig):
+  def __init__(self, fleet: FleetEnv, config: NavEnvConfig, bank: LayoutBank | None = None,
+               layout_worlds: tuple = ()):
     fc = fleet.config
     super().__init__(config_dict.ConfigDict({"ctrl_dt": fc.step_seconds, "sim_dt": fc.physics_dt}))
     self._fleet = fleet
     self._nav = config
     w = fleet.world
+    if bank is None:
+      bank = bank_from_worlds([w])
+      layout_worlds = (w,)
+    if bank.num_layouts > 1 and config.mode != "velocity":
+      raise ValueError("NavEnv: zone layouts (layouts > 1) need velocity mode; navigation mode drives the "
+                       "fleet on the scenario's own zones")
+    self._layout_worlds = tuple(layout_worlds)
     static = static_layer(jnp.asarray(w.scenario.map.data)[None], config=STATIC_LAYER)
     inflated = np.asarray(inflate(static, config=w.inflation)[0])
     task = NavTask(world=w.params, static_inflated=jnp.asarray(inflated),
-                   goal_logits=jnp.zeros((w.params.nav.stations.shape[0],), _F32))
+                   goal_logits=jnp.where(jnp.arange(bank.nav.stations.shape[0]) < bank.stations_per_layout,
+                                         0.0, -jnp.inf).astype(_F32),
+                   bank=bank, layout=jnp.zeros((), jnp.int32), navigation_mode=config.mode == "navigation")
     self._mjx_model = nav_model(fleet.mjx_model, task)
     self._crop = self._crop_offsets()
 
   @classmethod
   def create(cls, scenario: Scenario | None = None, fleet_config: FleetConfig | None = None,
-             config: NavEnvConfig = NavEnvConfig(), *, seed: int = 0) -> "NavEnv":
-    """Builds the world (as `FleetEnv.create`) and the env.
+             config: NavEnvConfig = NavEnvConfig(), *, seed: int = 0, layouts: int = 1,
+             layout_seed: int = 0, layout_config: LayoutConfig = LayoutConfig()) -> "NavEnv":
+    """Builds the world (as `FleetEnv.create`), the bank of zone layouts and the env.
 
     Args:
       scenario: maps (default: the built-in warehouse).
       fleet_config: FleetConfig (default: FleetConfig(robots_per_world=1)).
       config: NavEnvConfig.
       seed: host seed for station and spawn selection.
+      layouts: L >= 1 zone layouts in the bank (`sims.layouts`): 1 is the scenario's own zones;
+        more adds random keepout and speed zones (velocity mode only), drawn per env by
+        `randomize_zones_and_goals`.
+      layout_seed: host seed of the random layouts (different seeds give layouts never seen
+        with another).
+      layout_config: how random layouts are drawn.
 
     Raises:
-      ValueError: a bad config or scenario (see FleetEnv.create, build_world).
+      ValueError: a bad config or scenario (see FleetEnv.create, build_world), layouts < 1, or
+        layouts > 1 in navigation mode.
       TypeError: config of the wrong type.
     """
     if not isinstance(config, NavEnvConfig):
@@ -292,7 +341,18 @@ class NavEnv(mjx_env.MjxEnv):
     fleet_config = FleetConfig(robots_per_world=1) if fleet_config is None else fleet_config
     if not isinstance(fleet_config, FleetConfig):
       raise TypeError(f"fleet_config must be a FleetConfig; got {type(fleet_config).__name__}")
-    return cls(FleetEnv.create(scenario, fleet_config, seed=seed), config)
+    if isinstance(layouts, bool) or not isinstance(layouts, (int, np.integer)) or layouts < 1:
+      raise ValueError(f"layouts must be an integer >= 1; got {layouts!r}")
+    fleet = FleetEnv.create(scenario, fleet_config, seed=seed)
+    if layouts == 1:
+      return cls(fleet, config)
+    if config.mode != "velocity":
+      raise ValueError("NavEnv.create: zone layouts (layouts > 1) need velocity mode; navigation mode drives "
+                       "the fleet on the scenario's own zones")
+    cfg = dataclasses.replace(layout_config, include_scenario=False)
+    worlds = layout_worlds(fleet.world.scenario, fleet.config, int(layouts) - 1, layout_seed, cfg)
+    bank = bank_from_worlds([fleet.world, *worlds])
+    return cls(fleet, config, bank, (fleet.world, *worlds))
 
   # ------------------------------------------------------------------ contract
 
@@ -338,7 +398,18 @@ class NavEnv(mjx_env.MjxEnv):
 
   @property
   def num_stations(self) -> int:
+    """S, goal stations of the scenario (navigation mode's action range)."""
     return int(self._fleet.world.params.nav.stations.shape[0])
+
+  @property
+  def num_layouts(self) -> int:
+    """L, zone layouts in the bank (1: the scenario's own)."""
+    return self._mjx_model.task.bank.num_layouts
+
+  @property
+  def layout_worlds(self) -> tuple:
+    """The L `World`s of the bank (their scenarios hold each layout's masks, for pictures)."""
+    return self._layout_worlds
 
   def _crop_offsets(self) -> np.ndarray:
     n, s = self._nav.crop_cells, self._nav.crop_spacing
@@ -377,11 +448,23 @@ class NavEnv(mjx_env.MjxEnv):
     """
     task = self._mjx_model.task
     fleet = self._fleet.with_params(task.world)
-    k_world, k_goal, k_rng = jax.random.split(rng, 3)
+    k_world, k_goal, k_rng, k_spawn = jax.random.split(rng, 4)
     ws = fleet.reset(k_world)
-    xy = ws.data.qpos[:, :2]
-    goal = _sample_goal(k_goal, task.goal_logits, xy, jnp.full((self.num_robots,), -1, jnp.int32),
-                        task.world.nav.stations)
+    if self._nav.mode == "navigation":
+      xy = ws.data.qpos[:, :2]
+      goal = _sample_goal(k_goal, task.goal_logits, xy, jnp.full((self.num_robots,), -1, jnp.int32),
+                          task.world.nav, self._nav.goal_max_distance)
+    else:
+      # Distinct spawn points of the env's layout (clear of its keepout zones).
+      bank, lay = task.bank, task.layout
+      p_max = bank.spawns.shape[1]
+      score = jnp.where(jnp.arange(p_max) < bank.spawn_count[lay], jax.random.uniform(k_spawn, (p_max,)), -1.0)
+      _, idx = jax.lax.top_k(score, self.num_robots)
+      xy = bank.spawns[lay][idx]
+      qpos = ws.data.qpos.at[:, :2].set(xy)
+      ws = dataclasses.replace(ws, data=ws.data.replace(qpos=qpos))
+      goal = _sample_goal(k_goal, task.goal_logits, xy, jnp.full((self.num_robots,), -1, jnp.int32),
+                          bank.nav, self._nav.goal_max_distance)
     ws = dataclasses.replace(ws, goal=goal)
     zero = jnp.zeros((), _F32)
     metrics = {name: zero for name in self._metric_names()}
@@ -398,7 +481,7 @@ class NavEnv(mjx_env.MjxEnv):
 
   def _metric_names(self):
     return ("progress", "goals_reached", "keepout_entries", "collisions", "speed_violation_s",
-            "clipped", "bad_action")
+            "speed_violation_after_clip_s", "clipped", "bad_action")
 
   # ------------------------------------------------------------------ step
 
@@ -443,8 +526,9 @@ class NavEnv(mjx_env.MjxEnv):
     speed = jax.tree.map(lambda fresh, old: jnp.where(swapped, fresh, old), SpeedState.create(k), info["speed"])
     in_k = jnp.where(swapped, False, info["in_keepout"])
     goal = info["goal"]
-    stations = p.nav.stations
-    dist0 = jax.vmap(lambda g, q: navigation.nav_value(p.nav, g, q))(goal, qpos[:, :2])
+    nav = task.bank.nav
+    stations = nav.stations
+    dist0 = jax.vmap(lambda g, q: navigation.nav_value(nav, g, q))(goal, qpos[:, :2])
 
     dt = fc.control_dt
     step_acc = jnp.asarray([[r.max_accel * dt, r.max_yaw_accel * dt]], _F32)
@@ -453,7 +537,7 @@ class NavEnv(mjx_env.MjxEnv):
     def tick(carry, _):
       data, cmd, speed, in_k, acc = carry
       poses = data.qpos[:, :3]
-      speed, res = speed_filter(p.speed, poses, speed)
+      speed, res = speed_filter(task.bank.speed, poses, speed, mask_index=_layout_index(task, (k,)))
       cap = planner.limit_to_speed(res.speed_limit, res.percentage, jnp.ones((k,), bool), r.max_speed)
       ramped = cmd + jnp.clip(target - cmd, -step_acc, step_acc)
       clipped = clip_command(ramped, cap, r, fc.limit_angular)
@@ -461,44 +545,48 @@ class NavEnv(mjx_env.MjxEnv):
       v, w = clipped[:, 0], clipped[:, 1]
 
       def substep(c, _):
-        data, in_k, entries, collide, over = c
+        data, in_k, entries, collide, over, late_s = c
         th = data.qpos[:, 2]
         ctrl = jnp.stack([v * jnp.cos(th), v * jnp.sin(th), w], axis=1)
         data = jax.vmap(lambda d, u: mjx_step(model, d, u))(data, ctrl)
         xy = data.qpos[:, :2]
-        kin = keepout_cost_at(p.keepout, xy) >= constants.INSCRIBED_INFLATED_OBSTACLE
+        kin = _keepout_cost(task, xy) >= constants.INSCRIBED_INFLATED_OBSTACLE
         hit = _grid_value(task.static_inflated, p.map_origin, p.map_resolution, xy,
                           constants.NO_INFORMATION) >= constants.INSCRIBED_INFLATED_OBSTACLE
         spd = jnp.linalg.norm(data.qvel[:, :2], axis=-1)
-        over_limit = spd > _mps_cap(p, xy, r.max_speed) + tol
+        over_limit = spd > _mps_cap(task, xy, r.max_speed) + tol
+        # Above the limit this tick's filter already published: the clip did not hold it.
+        late = spd > cap + tol
         return (data, kin, entries + (kin & ~in_k), collide | hit,
-                over + over_limit.astype(_F32) * fc.physics_dt), None
+                over + over_limit.astype(_F32) * fc.physics_dt, late_s + late.astype(_F32) * fc.physics_dt), None
 
       zeros_b = jnp.zeros((k,), bool)
-      (data, in_k, entries, collide, over), _ = jax.lax.scan(
-          substep, (data, in_k, zeros_b.astype(jnp.int32), zeros_b, jnp.zeros((k,), _F32)), None,
+      zeros_f = jnp.zeros((k,), _F32)
+      (data, in_k, entries, collide, over, late), _ = jax.lax.scan(
+          substep, (data, in_k, zeros_b.astype(jnp.int32), zeros_b, zeros_f, zeros_f), None,
           length=fc.substeps_per_tick)
       acc = jax.tree.map(jnp.add, acc, {"entries": entries, "collide": collide.astype(jnp.int32),
-                                        "over": over, "excess": excess})
+                                        "over": over, "late": late, "excess": excess})
       return (data, clipped, speed, in_k, acc), cap
 
     acc0 = {"entries": jnp.zeros((k,), jnp.int32), "collide": jnp.zeros((k,), jnp.int32),
-            "over": jnp.zeros((k,), _F32), "excess": jnp.zeros((k,), _F32)}
+            "over": jnp.zeros((k,), _F32), "late": jnp.zeros((k,), _F32), "excess": jnp.zeros((k,), _F32)}
     (data, cmd, speed, in_k, acc), caps = jax.lax.scan(tick, (data, cmd, speed, in_k, acc0), None,
                                                        length=fc.ticks_per_step)
     xy = data.qpos[:, :2]
-    dist1 = jax.vmap(lambda g, q: navigation.nav_value(p.nav, g, q))(goal, xy)
+    dist1 = jax.vmap(lambda g, q: navigation.nav_value(nav, g, q))(goal, xy)
     reach = 2.0 * r.max_speed * fc.step_seconds
     progress = jnp.clip(dist0 - dist1, -reach, reach)
     reached = jnp.linalg.norm(xy - stations[goal], axis=-1) < fc.planner.goal_tolerance
     rng, k_goal = jax.random.split(info["rng"])
-    goal = jnp.where(reached, _sample_goal(k_goal, task.goal_logits, xy, goal, stations), goal)
+    goal = jnp.where(reached, _sample_goal(k_goal, task.goal_logits, xy, goal, nav, cfg.goal_max_distance),
+                     goal)
 
     c_end, s_end = jnp.cos(data.qpos[:, 2]), jnp.sin(data.qpos[:, 2])
     ahead = jnp.asarray(AHEAD[:2], _F32)
     motion = jnp.where(cmd[:, :1] < 0, -1.0, 1.0) * jnp.stack([c_end, s_end], axis=1)   # reversing too
     ahead_pts = xy[:, None, :] + ahead[None, :, None] * motion[:, None, :]
-    ahead_cap = jnp.min(_mps_cap(p, ahead_pts, r.max_speed), axis=1)
+    ahead_cap = jnp.min(_mps_cap(task, ahead_pts, r.max_speed), axis=1)
     approach = jnp.maximum(jnp.abs(cmd[:, 0]) - ahead_cap, 0.0) * fc.step_seconds
     collided = acc["collide"] > 0
     entered = acc["entries"] > 0
@@ -512,6 +600,7 @@ class NavEnv(mjx_env.MjxEnv):
     metrics.update({"progress": jnp.sum(progress), "goals_reached": jnp.sum(reached).astype(_F32),
                "keepout_entries": jnp.sum(acc["entries"]).astype(_F32),
                "collisions": jnp.sum(collided).astype(_F32), "speed_violation_s": jnp.sum(acc["over"]),
+               "speed_violation_after_clip_s": jnp.sum(acc["late"]),
                "clipped": jnp.sum(acc["excess"]), "bad_action": jnp.sum(bad).astype(_F32)})
     obs = self._obs(task, data, info)
     return state.replace(data=data, obs=obs, reward=reward.astype(_F32), done=done.astype(_F32),
@@ -554,7 +643,7 @@ class NavEnv(mjx_env.MjxEnv):
     wx, wy = _rotate(c[:, None], s[:, None], off[None, :, 0], off[None, :, 1])
     pts = jnp.stack([wx + pose[:, :1], wy + pose[:, 1:2]], axis=-1)       # [K, C2, 2]
     static = _grid_value(task.static_inflated, p.map_origin, p.map_resolution, pts, constants.NO_INFORMATION)
-    keep = keepout_cost_at(p.keepout, pts).astype(jnp.int32)
+    keep = _keepout_cost(task, pts).astype(jnp.int32)
     keep = jnp.where(keep == constants.NO_INFORMATION, 0, keep)
     crop = jnp.maximum(static, keep).astype(_F32) / 255.0                # [K, C2]
 
@@ -564,18 +653,19 @@ class NavEnv(mjx_env.MjxEnv):
                          limited.astype(_F32)], axis=1)
     ahead = jnp.asarray(AHEAD, _F32)
     ahead_pts = pose[:, None, :2] + ahead[None, :, None] * jnp.stack([c, s], axis=1)[:, None, :]
-    ahead_cap = _mps_cap(p, ahead_pts, r.max_speed)
+    ahead_cap = _mps_cap(task, ahead_pts, r.max_speed)
     ahead_obs = jnp.where(jnp.isfinite(ahead_cap), jnp.minimum(ahead_cap / r.max_speed, 1.0), 1.0)
 
-    goal_xy = p.nav.stations[info["goal"]]
+    nav = task.bank.nav
+    goal_xy = nav.stations[info["goal"]]
     d = goal_xy - pose[:, :2]
     gx, gy = _rotate(c, -s, d[:, 0], d[:, 1])
     gdist = jnp.linalg.norm(d, axis=-1)
     goal_obs = jnp.stack([jnp.clip(gx / 5.0, -1, 1), jnp.clip(gy / 5.0, -1, 1),
                           jnp.minimum(gdist / 10.0, 1.0)], axis=1)
-    desc = jax.vmap(lambda g, q: navigation.descent_direction(p.nav, g, q))(info["goal"], pose[:, :2])
+    desc = jax.vmap(lambda g, q: navigation.descent_direction(nav, g, q))(info["goal"], pose[:, :2])
     dx, dy = _rotate(c, -s, desc[:, 0], desc[:, 1])
-    ndist = jax.vmap(lambda g, q: navigation.nav_value(p.nav, g, q))(info["goal"], pose[:, :2])
+    ndist = jax.vmap(lambda g, q: navigation.nav_value(nav, g, q))(info["goal"], pose[:, :2])
     nav_obs = jnp.stack([dx, dy, jnp.minimum(ndist / 20.0, 1.0)], axis=1)
 
     spd = jnp.linalg.norm(data.qvel[:, :2], axis=-1)
@@ -611,16 +701,19 @@ class NavEnv(mjx_env.MjxEnv):
 # ----------------------------------------------------------------------------- randomisation
 
 
-def randomize_zones_and_goals(model: NavModel, rng: jax.Array, *, limit_scale: tuple[float, float] = (0.6, 1.0),
+def randomize_zones_and_goals(model: NavModel, rng: jax.Array, *, limit_scale: tuple[float, float] = (0.75, 1.0),
                               zone_shift: float = 0.5, goal_keep: float = 0.5) -> tuple[NavModel, Any]:
-  """Playground/Brax `randomization_fn`: per-env speed zones and goal stations.
+  """Playground/Brax `randomization_fn`: per-env zone layout, zone limits, zone positions and goals.
 
-  For env i: the speed mask's base and multiplier are scaled by
-  u_i ~ U(limit_scale) (every zone's limit scales by u_i; "no limit" cells stay
-  unlimited), the mask's origin moves by U(-zone_shift, zone_shift) m in x and
-  y (the zones move; the planner's per-cell cap moves with them), and each goal
-  station stays in the goal distribution with probability goal_keep (at least
-  two always do).
+  For env i (velocity mode): a layout l_i ~ U{0..L-1} of the env's bank (`NavEnv.create(layouts=L)`:
+  keepout and speed zones at random places and sizes, the speed zones with random limits); every
+  speed mask's base and multiplier scaled by u_i ~ U(limit_scale) (each zone's limit scales by u_i;
+  Nav2 keeps a mask value of 0 as "no limit"); the speed masks' origins moved by
+  U(-zone_shift, zone_shift) m in x and y (the speed zones move; keepout zones stay where the
+  layout's navigation field expects them); and each goal station of layout l_i stays in the goal
+  distribution with probability goal_keep (at least two always do; other layouts' stations never
+  are goals). In navigation mode (one layout, the fleet's planner) the scale and shift apply to
+  the world's speed mask and the planner's per-cell caps instead.
 
   Args:
     model: the env's NavModel (`env.mjx_model`).
@@ -647,33 +740,68 @@ def randomize_zones_and_goals(model: NavModel, rng: jax.Array, *, limit_scale: t
   if rng.ndim != 2 or rng.shape[1] != 2:
     raise ValueError(f"rng must be uint32 [N, 2], one key per env; got shape {tuple(rng.shape)}")
   task = model.task
-  speed = task.world.speed
-  s = task.goal_logits.shape[0]
+  bank = task.bank
+  nav_mode = task.navigation_mode
+  speed = task.world.speed if nav_mode else bank.speed
+  num_layouts, per = bank.num_layouts, bank.stations_per_layout
 
   def one(key):
-    k_scale, k_shift, k_keep, k_perm = jax.random.split(key, 4)
+    k_layout, k_scale, k_shift, k_keep, k_perm = jax.random.split(key, 5)
+    layout = jax.random.randint(k_layout, (), 0, num_layouts, jnp.int32)
     u = jax.random.uniform(k_scale, (), _F32, lo, hi)
     shift = jax.random.uniform(k_shift, (2,), _F32, -zone_shift, zone_shift)
-    keep = jax.random.bernoulli(k_keep, goal_keep, (s,))
-    first_two = jnp.zeros((s,), bool).at[jax.random.permutation(k_perm, s)[:2]].set(True)
-    logits = jnp.where(keep | first_two, 0.0, -jnp.inf).astype(_F32)
+    keep = jax.random.bernoulli(k_keep, goal_keep, (per,))
+    first_two = jnp.zeros((per,), bool).at[jax.random.permutation(k_perm, per)[:2]].set(True)
+    own = jnp.where(keep | first_two, 0.0, -jnp.inf).astype(_F32)
+    logits = jnp.full((num_layouts, per), -jnp.inf, _F32).at[layout].set(own).reshape(-1)
     info = dataclasses.replace(speed.info, base=speed.info.base * u, multiplier=speed.info.multiplier * u)
-    return (info, speed.origin + shift[None, :], task.world.speed_cap * u, task.world.zone_speed * u, logits)
+    out = {"layout": layout, "info": info, "origin": speed.origin + shift[None, :], "logits": logits}
+    if nav_mode:
+      out.update(cap=task.world.speed_cap * u, zone_speed=task.world.zone_speed * u)
+    return out
 
-  info, origin, cap, zone_speed, logits = jax.vmap(one)(rng)
-  v_model = model.tree_replace({
-      "task.world": dataclasses.replace(
-          task.world, speed=dataclasses.replace(speed, info=info, origin=origin), speed_cap=cap,
-          zone_speed=zone_speed),
-      "task.goal_logits": logits})
-  in_axes = jax.tree.map(lambda _: None, model)
-  world_axes = jax.tree.map(lambda _: None, task.world)
-  speed_axes = dataclasses.replace(world_axes.speed, info=jax.tree.map(lambda _: 0, speed.info), origin=0)
-  in_axes = in_axes.tree_replace({
-      "task.world": dataclasses.replace(world_axes, speed=speed_axes, speed_cap=0, zone_speed=0),
-      "task.goal_logits": 0})
+  v = jax.vmap(one)(rng)
+  new_speed = dataclasses.replace(speed, info=v["info"], origin=v["origin"])
+  speed_axes = dataclasses.replace(jax.tree.map(lambda _: None, speed), info=jax.tree.map(lambda _: 0, speed.info),
+                                   origin=0)
+  changes = {"task.goal_logits": v["logits"], "task.layout": v["layout"]}
+  axes = {"task.goal_logits": 0, "task.layout": 0}
+  if nav_mode:
+    changes["task.world"] = dataclasses.replace(task.world, speed=new_speed, speed_cap=v["cap"],
+                                                zone_speed=v["zone_speed"])
+    axes["task.world"] = dataclasses.replace(jax.tree.map(lambda _: None, task.world), speed=speed_axes,
+                                             speed_cap=0, zone_speed=0)
+  else:
+    changes["task.bank"] = dataclasses.replace(bank, speed=new_speed)
+    axes["task.bank"] = dataclasses.replace(jax.tree.map(lambda _: None, bank), speed=speed_axes)
+  v_model = model.tree_replace(changes)
+  in_axes = jax.tree.map(lambda _: None, model).tree_replace(axes)
   return v_model, in_axes
 
 
+def training_env(scenario: Scenario | None = None, *, randomize: bool, seed: int,
+                 config: NavEnvConfig = NavEnvConfig(), layouts: int = 32,
+                 layout_config: LayoutConfig = LayoutConfig()):
+  """The env and randomization_fn the `jaxfilters rl` commands train and evaluate on.
+
+  Args:
+    scenario: maps (default: the built-in warehouse).
+    randomize: draw zone layouts, limits and goals per episode (`randomize_zones_and_goals`) from
+      a bank of `layouts` layouts (the scenario's own first); False: the scenario's zones only.
+    seed: host seed of the random layouts (evaluation passes seeds training never used, so
+      its layouts are new).
+    config: NavEnvConfig (velocity mode).
+    layouts: L, bank size when randomize.
+    layout_config: how random layouts are drawn.
+
+  Returns:
+    (NavEnv, randomization_fn or None).
+  """
+  if not randomize:
+    return NavEnv.create(scenario, config=config), None
+  env = NavEnv.create(scenario, config=config, layouts=layouts, layout_seed=seed, layout_config=layout_config)
+  return env, randomize_zones_and_goals
+
+
 __all__ = ["AHEAD", "KEEPOUT_MODES", "MODES", "NavEnv", "NavEnvConfig", "NavModel", "NavTask", "State",
-           "clip_command", "nav_model", "randomize_zones_and_goals"]
+           "clip_command", "nav_model", "randomize_zones_and_goals", "training_env"]
