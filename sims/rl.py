@@ -62,6 +62,7 @@ it left) and restarts the per-episode state (command, speed-filter state), so
 both reset styles are consistent. `full_reset=True` also draws a new goal.
 """
 
+import copy
 import dataclasses
 from typing import Any
 
@@ -258,25 +259,30 @@ def _keepout_cost(task: NavTask, xy: jax.Array) -> jax.Array:
   return keepout_cost_at(task.bank.keepout, xy, mask_index=_layout_index(task, xy.shape[:-1]))
 
 
-def _sample_goal(key, logits, xy, current, nav: navigation.NavField, max_dist: float):
-  """A station per robot from the goal distribution: not the current one, > 2 m away in a straight
-  line and within `max_dist` m of navigation distance (0: any) if possible, else relaxing those."""
+def _sample_goal(key, logits, xy, current, nav: navigation.NavField, max_dist: float, first, count: int):
+  """A goal per robot among stations first .. first + count - 1 (the env's layout), drawn from the
+  goal distribution: not the current one, > 2 m away in a straight line and within `max_dist` m
+  of navigation distance (0: any) if possible, else relaxing those in that order.
+
+  Returns:
+    int32 [K] station ids of `nav` (first + s).
+  """
   k = xy.shape[0]
-  stations = nav.stations
-  s = stations.shape[0]
-  ids = jnp.arange(s, dtype=jnp.int32)
+  ids = first + jnp.arange(count, dtype=jnp.int32)
+  stations = nav.stations[ids]
+  lg = logits[ids]
   far = jnp.linalg.norm(stations[None] - xy[:, None], axis=-1) > 2.0
   if max_dist > 0:
-    active = jnp.isfinite(logits)
-    near = jax.vmap(lambda q: jax.vmap(lambda g: jnp.where(
-        active[g], navigation.nav_value(nav, g, q), jnp.inf))(ids))(xy) <= max_dist   # [K, S]
-    far = far & near
+    active = jnp.isfinite(lg)
+    dist = jax.vmap(lambda q: jax.vmap(lambda g: navigation.nav_value(nav, g, q))(ids))(xy)   # [K, count]
+    far = far & active[None, :] & (dist <= max_dist)
   other = ids[None, :] != current[:, None]
-  base = jnp.broadcast_to(logits[None, :], (k, s))
+  base = jnp.broadcast_to(lg[None, :], (k, count))
   pick = jnp.where(far & other, base, -jnp.inf)
   pick = jnp.where(jnp.any(jnp.isfinite(pick), axis=1, keepdims=True), pick, jnp.where(other, base, -jnp.inf))
   pick = jnp.where(jnp.any(jnp.isfinite(pick), axis=1, keepdims=True), pick, base)
-  return jax.vmap(jax.random.categorical)(jax.random.split(key, k), pick).astype(jnp.int32)
+  j = jax.vmap(jax.random.categorical)(jax.random.split(key, k), pick).astype(jnp.int32)
+  return ids[j]
 
 
 # ----------------------------------------------------------------------------- env
@@ -406,6 +412,14 @@ class NavEnv(mjx_env.MjxEnv):
     """L, zone layouts in the bank (1: the scenario's own)."""
     return self._mjx_model.task.bank.num_layouts
 
+  def with_model(self, model: NavModel) -> "NavEnv":
+    """A shallow copy of the env that reads `model` (the same shapes: e.g. one env's randomised
+    model, or `env.mjx_model.tree_replace({"task.layout": l})` to drive in layout l). Pass the
+    model as a jit argument to compile one program for every model."""
+    env = copy.copy(self)
+    env._mjx_model = model
+    return env
+
   @property
   def layout_worlds(self) -> tuple:
     """The L `World`s of the bank (their scenarios hold each layout's masks, for pictures)."""
@@ -453,7 +467,7 @@ class NavEnv(mjx_env.MjxEnv):
     if self._nav.mode == "navigation":
       xy = ws.data.qpos[:, :2]
       goal = _sample_goal(k_goal, task.goal_logits, xy, jnp.full((self.num_robots,), -1, jnp.int32),
-                          task.world.nav, self._nav.goal_max_distance)
+                          task.world.nav, self._nav.goal_max_distance, 0, self.num_stations)
     else:
       # Distinct spawn points of the env's layout (clear of its keepout zones).
       bank, lay = task.bank, task.layout
@@ -463,8 +477,9 @@ class NavEnv(mjx_env.MjxEnv):
       xy = bank.spawns[lay][idx]
       qpos = ws.data.qpos.at[:, :2].set(xy)
       ws = dataclasses.replace(ws, data=ws.data.replace(qpos=qpos))
+      per = bank.stations_per_layout
       goal = _sample_goal(k_goal, task.goal_logits, xy, jnp.full((self.num_robots,), -1, jnp.int32),
-                          bank.nav, self._nav.goal_max_distance)
+                          bank.nav, self._nav.goal_max_distance, lay * per, per)
     ws = dataclasses.replace(ws, goal=goal)
     zero = jnp.zeros((), _F32)
     metrics = {name: zero for name in self._metric_names()}
@@ -579,8 +594,9 @@ class NavEnv(mjx_env.MjxEnv):
     progress = jnp.clip(dist0 - dist1, -reach, reach)
     reached = jnp.linalg.norm(xy - stations[goal], axis=-1) < fc.planner.goal_tolerance
     rng, k_goal = jax.random.split(info["rng"])
-    goal = jnp.where(reached, _sample_goal(k_goal, task.goal_logits, xy, goal, nav, cfg.goal_max_distance),
-                     goal)
+    per = task.bank.stations_per_layout
+    goal = jnp.where(reached, _sample_goal(k_goal, task.goal_logits, xy, goal, nav, cfg.goal_max_distance,
+                                           task.layout * per, per), goal)
 
     c_end, s_end = jnp.cos(data.qpos[:, 2]), jnp.sin(data.qpos[:, 2])
     ahead = jnp.asarray(AHEAD[:2], _F32)

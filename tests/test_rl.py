@@ -244,7 +244,7 @@ def test_brax_wrappers_with_zone_and_goal_randomisation():
   fn = functools.partial(randomize_zones_and_goals, rng=keys, limit_scale=(0.5, 0.9), goal_keep=0.3)
   model_v, _ = fn(env.mjx_model)
   logits = np.asarray(model_v.task.goal_logits)
-  mult = np.asarray(model_v.task.world.speed.info.multiplier)[:, 0]
+  mult = np.asarray(model_v.task.bank.speed.info.multiplier)[:, 0]   # velocity mode: the bank's masks
   assert len(set(mult.tolist())) == n and np.all((mult <= -0.5) & (mult >= -0.9))
   assert np.all(np.isfinite(logits).sum(1) >= 2)
   wrapped = wrapper.wrap_for_brax_training(env, episode_length=3, randomization_fn=fn, full_reset=True)
@@ -263,7 +263,7 @@ def test_brax_wrappers_with_zone_and_goal_randomisation():
   sc = env.fleet.world.scenario
   rows, cols = np.nonzero(sc.speed.data == 50)
   xy = np.float32(_cell_xy(sc.speed.origin, sc.speed.resolution, int(np.median(rows)), int(np.median(cols))))
-  speed = model_v.task.world.speed
+  speed = model_v.task.bank.speed
   lim = [float(speed_limit_at(dataclasses.replace(speed, origin=speed.origin[i],
                                                   info=jax.tree.map(lambda a: a[i], speed.info)), xy)[0])
          for i in range(n)]
