@@ -47,8 +47,8 @@ that return JAX arrays; these return NumPy.
 Spaces: observation float32 [D] (D = `NavEnv.observation_size`, 98 for one
 robot) in a Box of [-OBS_BOUND, OBS_BOUND] (every entry of the velocity-mode
 observation is normalised to [-1, 1]: clipped, a ratio to a maximum, or a unit
-vector's component; the bound leaves room for float32 rounding of the last
-two); action float32 [A] (A = 2K, each robot's (v, w)) in Box(-1, 1).
+vector's component; the bound leaves room for float32 rounding in the ratios
+and unit vectors); action float32 [A] (A = 2K, each robot's (v, w)) in Box(-1, 1).
 
 Episodes: the time limit (`episode_length` env steps of 0.2 s) sets
 `truncated`; a keepout entry (with `NavEnvConfig(keepout="terminate")`, the

@@ -171,6 +171,12 @@ def test_vector_wrong_actions_raise(venv):
   for bad, match in cases:
     with pytest.raises(ValueError, match=match):
       venv.step(bad)
+  with pytest.raises(ValueError, match="structure of the current state"):
+    venv.state = venv.state.replace(model_leaves=[])
+  qpos = venv.state.env_state.data.qpos
+  with pytest.raises(ValueError, match="shape/dtype"):
+    venv.state = venv.state.replace(env_state=venv.state.env_state.replace(
+        data=venv.state.env_state.data.replace(qpos=qpos[:1])))
   fresh = NavVectorEnv(N, episode_length=T, randomize=True, env=venv.env)   # shares the compiled programs
   with pytest.raises(ResetNeeded, match="before reset"):
     fresh.step(ok)
@@ -224,15 +230,22 @@ def test_vector_terminals_truncation_and_same_step_autoreset(venv, nav):
   np.testing.assert_array_equal(truncated, [True, True, False])
 
 
-def test_vector_random_policy_stays_in_the_spaces(venv):
-  venv.reset(seed=5)
+def test_vector_random_policy_stays_in_the_spaces_and_replays(venv):
   venv.action_space.seed(5)
-  for _ in range(12):
-    a = venv.action_space.sample()
-    obs, reward, terminated, truncated, infos = venv.step(a)
-    assert obs in venv.observation_space and infos["final_obs"] in venv.observation_space
-    assert np.all(np.isfinite(reward)) and not np.any(terminated & truncated)
-    assert np.all(infos["metrics"]["bad_action"] == 0)
+  actions = [venv.action_space.sample() for _ in range(12)]
+  runs = []
+  for _ in range(2):                                           # same seed, same actions: same episodes
+    venv.reset(seed=5)
+    run = []
+    for a in actions:
+      obs, reward, terminated, truncated, infos = venv.step(a)
+      assert obs in venv.observation_space and infos["final_obs"] in venv.observation_space
+      assert np.all(np.isfinite(reward)) and not np.any(terminated & truncated)
+      assert np.all(infos["metrics"]["bad_action"] == 0)
+      run.append((obs, reward, terminated, truncated))
+    runs.append(run)
+  for x, y in zip(jax.tree.leaves(runs[0]), jax.tree.leaves(runs[1])):
+    np.testing.assert_array_equal(x, y)
 
 
 def test_torch_wrapper(venv):
