@@ -14,6 +14,8 @@ JAX starts.
 
 The fleet library is the modules of this package; its entry points (the
 `fleet` and `bench` commands and the scripts) live in `sims/scripts/`.
+`NavGymEnv` and `NavVectorEnv` (Gymnasium interfaces to the RL env) need the
+`rl` extra; `import sims` imports neither Gymnasium nor MuJoCo Playground.
 `sims/quiet_mjx.py` says how the two lines mujoco.mjx prints without
 warp-lang are kept off the screen.
 """
@@ -28,6 +30,7 @@ _EXPORTS = {
     "Scenario": "sims.scenario",
     "World": "sims.world", "WorldParams": "sims.world", "build_world": "sims.world",
     "fleet_throughput": "sims.bench",
+    "NavGymEnv": "sims.gym_env", "NavVectorEnv": "sims.gym_env",
 }
 __all__ = sorted(_EXPORTS)
 
