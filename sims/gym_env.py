@@ -5,7 +5,7 @@ jitted, vmapped JAX call (CleanRL-style loops, PufferLib); `NavGymEnv` is one
 `gymnasium.Env` (what Stable-Baselines3 wraps; it passes
 `gymnasium.utils.env_checker.check_env`). Both sit on `sims.adapter.GymnaxAdapter`
 (Brax's time limit inside; with `randomize=True`, zones and goals drawn per
-episode by `sims.rl.randomize_zones_and_goals`), so they run the same env as
+episode by `sims.randomization.randomize_zones_and_goals`), so they run the same env as
 the JAX trainer:
 
     import numpy as np
@@ -104,7 +104,8 @@ from gymnasium.vector import AutoresetMode
 from gymnasium.vector.utils import batch_space
 
 from sims.adapter import AdapterState, GymnaxAdapter
-from sims.rl import NavEnv, randomize_zones_and_goals
+from sims.randomization import randomize_zones_and_goals
+from sims.rl import NavEnv
 
 OBS_BOUND = 1.0 + 1e-4      # Box bound of every observation entry (normalised to [-1, 1], plus rounding room)
 DEFAULT_EPISODE_LENGTH = 150  # env steps of 0.2 s (30 s), the PPO trainer's default
@@ -243,7 +244,7 @@ class NavVectorEnv(gymnasium.vector.VectorEnv):
     num_envs: N >= 1.
     episode_length: env steps of 0.2 s per episode (the time limit; `truncated`).
     randomize: draw zones and goals per episode (`randomization_fn`, by default
-      `sims.rl.randomize_zones_and_goals`).
+      `sims.randomization.randomize_zones_and_goals`).
     env: the `NavEnv` to batch (default `NavEnv.create()`, the built-in warehouse, 1 robot).
     randomization_fn: Playground `fn(model, rng) -> (model_v, in_axes)`; only with randomize=True.
     render_mode: None (the env does not render).
@@ -361,7 +362,7 @@ class NavGymEnv(gymnasium.Env):
   Args:
     episode_length: env steps of 0.2 s per episode (the time limit; `truncated`).
     randomize: draw zones and goals at each reset (`randomization_fn`, by default
-      `sims.rl.randomize_zones_and_goals`).
+      `sims.randomization.randomize_zones_and_goals`).
     env: the `NavEnv` (default `NavEnv.create()`); wrappers of one NavEnv with the
       same settings share one compiled program.
     randomization_fn: Playground `fn(model, rng) -> (model_v, in_axes)`; only with randomize=True.

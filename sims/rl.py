@@ -54,7 +54,7 @@ goal and is counted there too. Static problems (shape, dtype) raise
 The world (maps, navigation field, speed and keepout masks) and the goal
 distribution ride in the model: `NavModel` is an `mjx.Model` with one more
 pytree field, `task`, so Playground's domain-randomisation wrapper batches
-zones and goals like any model field (`randomize_zones_and_goals`).
+zones and goals like any model field (`sims.randomization.randomize_zones_and_goals`).
 
 Auto-reset: Playground's `BraxAutoResetWrapper(full_reset=False)` restores
 `data` and `obs` but not `info`; `step` notices (the pose differs from the one
@@ -64,7 +64,6 @@ both reset styles are consistent. `full_reset=True` also draws a new goal.
 
 import copy
 import dataclasses
-from typing import Any
 
 import jax
 import jax.numpy as jnp
@@ -83,13 +82,14 @@ except ImportError as e:  # pragma: no cover - exercised only without the extra
   raise ImportError("sims.rl needs MuJoCo Playground: pip install 'jaxfilters[rl]' "
                     f"(playground==0.2.0; {e})") from None
 
-from jaxfilters import constants, geometry
+from jaxfilters import constants
 from jaxfilters.inflation import inflate
-from jaxfilters.query import keepout_cost_at, speed_limit_at
 from jaxfilters.speed import SpeedState, speed_filter
 from jaxfilters.static_layer import static_layer
 from sims import navigation, planner
-from sims.config import FleetConfig, RobotConfig
+from sims import rl_kernels as kernels
+from sims.rl_kernels import clip_command
+from sims.config import FleetConfig
 from sims.env import ROBOT_XML, FleetEnv, WorldState, mjx_step
 from sims.scenario import Scenario
 from sims.layouts import LayoutBank, LayoutConfig, bank_from_worlds, layout_worlds
@@ -209,82 +209,6 @@ def nav_model(model: mjx.Model, task: NavTask) -> NavModel:
   return NavModel(**{f.name: getattr(model, f.name) for f in dataclasses.fields(mjx.Model)}, task=task)
 
 
-# ----------------------------------------------------------------------------- kernels
-
-
-def clip_command(cmd: jax.Array, cap: jax.Array, robot: RobotConfig, limit_angular: bool) -> jax.Array:
-  """The fleet's hard clip of commands to the speed limit in force (sims/env.py `_tick`).
-
-  Args:
-    cmd: float32 [K, 2] (v m/s, w rad/s).
-    cap: float32 [K] speed cap in m/s (+inf = no limit), from `planner.limit_to_speed`.
-    robot: RobotConfig (max_speed, max_yaw_rate).
-    limit_angular: also scale the yaw rate by cap / max_speed (FleetConfig.limit_angular).
-
-  Returns:
-    float32 [K, 2]: |v| <= cap; |w| <= max_yaw_rate * min(cap / max_speed, 1) if limit_angular.
-  """
-  v = jnp.clip(cmd[:, 0], -cap, cap)
-  w = cmd[:, 1]
-  if limit_angular:
-    w_cap = robot.max_yaw_rate * jnp.minimum(cap / robot.max_speed, 1.0)
-    w = jnp.clip(w, -w_cap, w_cap)
-  return jnp.stack([v, w], axis=1)
-
-
-def _grid_value(grid: jax.Array, origin: jax.Array, res: jax.Array, xy: jax.Array, fill: int) -> jax.Array:
-  """uint8 grid value at points xy [..., 2] (exact worldToMap), `fill` off the grid (int32)."""
-  h, w = grid.shape
-  mx, my, ok = geometry.world_to_cell(xy[..., 0], xy[..., 1], origin, res, w, h)
-  return jnp.where(ok, grid[my, mx].astype(jnp.int32), fill)
-
-
-def _rotate(c, s, x, y):
-  return c * x - s * y, s * x + c * y
-
-
-def _layout_index(task: NavTask, lead: tuple[int, ...]) -> jax.Array:
-  """The env's layout as a mask_index of the points' leading shape."""
-  return jnp.broadcast_to(task.layout.astype(jnp.int32), lead)
-
-
-def _mps_cap(task: NavTask, xy: jax.Array, max_speed: float) -> jax.Array:
-  """Speed limit of the env's speed mask at points xy [..., 2] in m/s (+inf: none, off-mask or unknown)."""
-  limit, pct, valid = speed_limit_at(task.bank.speed, xy, mask_index=_layout_index(task, xy.shape[:-1]))
-  return planner.limit_to_speed(limit, pct, valid, max_speed)
-
-
-def _keepout_cost(task: NavTask, xy: jax.Array) -> jax.Array:
-  """Keepout filter cost of the env's keepout mask at points xy [..., 2] (uint8; NO_INFORMATION off it)."""
-  return keepout_cost_at(task.bank.keepout, xy, mask_index=_layout_index(task, xy.shape[:-1]))
-
-
-def _sample_goal(key, logits, xy, current, nav: navigation.NavField, max_dist: float, first, count: int):
-  """A goal per robot among stations first .. first + count - 1 (the env's layout), drawn from the
-  goal distribution: not the current one, > 2 m away in a straight line and within `max_dist` m
-  of navigation distance (0: any) if possible, else relaxing those in that order.
-
-  Returns:
-    int32 [K] station ids of `nav` (first + s).
-  """
-  k = xy.shape[0]
-  ids = first + jnp.arange(count, dtype=jnp.int32)
-  stations = nav.stations[ids]
-  lg = logits[ids]
-  far = jnp.linalg.norm(stations[None] - xy[:, None], axis=-1) > 2.0
-  if max_dist > 0:
-    active = jnp.isfinite(lg)
-    dist = jax.vmap(lambda q: jax.vmap(lambda g: navigation.nav_value(nav, g, q))(ids))(xy)   # [K, count]
-    far = far & active[None, :] & (dist <= max_dist)
-  other = ids[None, :] != current[:, None]
-  base = jnp.broadcast_to(lg[None, :], (k, count))
-  pick = jnp.where(far & other, base, -jnp.inf)
-  pick = jnp.where(jnp.any(jnp.isfinite(pick), axis=1, keepdims=True), pick, jnp.where(other, base, -jnp.inf))
-  pick = jnp.where(jnp.any(jnp.isfinite(pick), axis=1, keepdims=True), pick, base)
-  j = jax.vmap(jax.random.categorical)(jax.random.split(key, k), pick).astype(jnp.int32)
-  return ids[j]
-
-
 # ----------------------------------------------------------------------------- env
 
 
@@ -332,7 +256,7 @@ class NavEnv(mjx_env.MjxEnv):
       seed: host seed for station and spawn selection.
       layouts: L >= 1 zone layouts in the bank (`sims.layouts`): 1 is the scenario's own zones;
         more adds random keepout and speed zones (velocity mode only), drawn per env by
-        `randomize_zones_and_goals`.
+        `sims.randomization.randomize_zones_and_goals`.
       layout_seed: host seed of the random layouts (different seeds give layouts never seen
         with another).
       layout_config: how random layouts are drawn.
@@ -466,7 +390,7 @@ class NavEnv(mjx_env.MjxEnv):
     ws = fleet.reset(k_world)
     if self._nav.mode == "navigation":
       xy = ws.data.qpos[:, :2]
-      goal = _sample_goal(k_goal, task.goal_logits, xy, jnp.full((self.num_robots,), -1, jnp.int32),
+      goal = kernels.sample_goal(k_goal, task.goal_logits, xy, jnp.full((self.num_robots,), -1, jnp.int32),
                           task.world.nav, self._nav.goal_max_distance, 0, self.num_stations)
     else:
       # Distinct spawn points of the env's layout (clear of its keepout zones).
@@ -478,7 +402,7 @@ class NavEnv(mjx_env.MjxEnv):
       qpos = ws.data.qpos.at[:, :2].set(xy)
       ws = dataclasses.replace(ws, data=ws.data.replace(qpos=qpos))
       per = bank.stations_per_layout
-      goal = _sample_goal(k_goal, task.goal_logits, xy, jnp.full((self.num_robots,), -1, jnp.int32),
+      goal = kernels.sample_goal(k_goal, task.goal_logits, xy, jnp.full((self.num_robots,), -1, jnp.int32),
                           bank.nav, self._nav.goal_max_distance, lay * per, per)
     ws = dataclasses.replace(ws, goal=goal)
     zero = jnp.zeros((), _F32)
@@ -552,7 +476,7 @@ class NavEnv(mjx_env.MjxEnv):
     def tick(carry, _):
       data, cmd, speed, in_k, acc = carry
       poses = data.qpos[:, :3]
-      speed, res = speed_filter(task.bank.speed, poses, speed, mask_index=_layout_index(task, (k,)))
+      speed, res = speed_filter(task.bank.speed, poses, speed, mask_index=kernels.layout_index(task, (k,)))
       cap = planner.limit_to_speed(res.speed_limit, res.percentage, jnp.ones((k,), bool), r.max_speed)
       ramped = cmd + jnp.clip(target - cmd, -step_acc, step_acc)
       clipped = clip_command(ramped, cap, r, fc.limit_angular)
@@ -565,11 +489,11 @@ class NavEnv(mjx_env.MjxEnv):
         ctrl = jnp.stack([v * jnp.cos(th), v * jnp.sin(th), w], axis=1)
         data = jax.vmap(lambda d, u: mjx_step(model, d, u))(data, ctrl)
         xy = data.qpos[:, :2]
-        kin = _keepout_cost(task, xy) >= constants.INSCRIBED_INFLATED_OBSTACLE
-        hit = _grid_value(task.static_inflated, p.map_origin, p.map_resolution, xy,
+        kin = kernels.keepout_cost(task, xy) >= constants.INSCRIBED_INFLATED_OBSTACLE
+        hit = kernels.grid_value(task.static_inflated, p.map_origin, p.map_resolution, xy,
                           constants.NO_INFORMATION) >= constants.INSCRIBED_INFLATED_OBSTACLE
         spd = jnp.linalg.norm(data.qvel[:, :2], axis=-1)
-        over_limit = spd > _mps_cap(task, xy, r.max_speed) + tol
+        over_limit = spd > kernels.mps_cap(task, xy, r.max_speed) + tol
         # Above the limit this tick's filter already published: the clip did not hold it.
         late = spd > cap + tol
         return (data, kin, entries + (kin & ~in_k), collide | hit,
@@ -595,14 +519,14 @@ class NavEnv(mjx_env.MjxEnv):
     reached = jnp.linalg.norm(xy - stations[goal], axis=-1) < fc.planner.goal_tolerance
     rng, k_goal = jax.random.split(info["rng"])
     per = task.bank.stations_per_layout
-    goal = jnp.where(reached, _sample_goal(k_goal, task.goal_logits, xy, goal, nav, cfg.goal_max_distance,
+    goal = jnp.where(reached, kernels.sample_goal(k_goal, task.goal_logits, xy, goal, nav, cfg.goal_max_distance,
                                            task.layout * per, per), goal)
 
     c_end, s_end = jnp.cos(data.qpos[:, 2]), jnp.sin(data.qpos[:, 2])
     ahead = jnp.asarray(AHEAD[:2], _F32)
     motion = jnp.where(cmd[:, :1] < 0, -1.0, 1.0) * jnp.stack([c_end, s_end], axis=1)   # reversing too
     ahead_pts = xy[:, None, :] + ahead[None, :, None] * motion[:, None, :]
-    ahead_cap = jnp.min(_mps_cap(task, ahead_pts, r.max_speed), axis=1)
+    ahead_cap = jnp.min(kernels.mps_cap(task, ahead_pts, r.max_speed), axis=1)
     approach = jnp.maximum(jnp.abs(cmd[:, 0]) - ahead_cap, 0.0) * fc.step_seconds
     collided = acc["collide"] > 0
     entered = acc["entries"] > 0
@@ -656,10 +580,10 @@ class NavEnv(mjx_env.MjxEnv):
     pose = data.qpos[:, :3]
     c, s = jnp.cos(pose[:, 2]), jnp.sin(pose[:, 2])
     off = jnp.asarray(self._crop)                                          # [C2, 2]
-    wx, wy = _rotate(c[:, None], s[:, None], off[None, :, 0], off[None, :, 1])
+    wx, wy = kernels.rotate(c[:, None], s[:, None], off[None, :, 0], off[None, :, 1])
     pts = jnp.stack([wx + pose[:, :1], wy + pose[:, 1:2]], axis=-1)       # [K, C2, 2]
-    static = _grid_value(task.static_inflated, p.map_origin, p.map_resolution, pts, constants.NO_INFORMATION)
-    keep = _keepout_cost(task, pts).astype(jnp.int32)
+    static = kernels.grid_value(task.static_inflated, p.map_origin, p.map_resolution, pts, constants.NO_INFORMATION)
+    keep = kernels.keepout_cost(task, pts).astype(jnp.int32)
     keep = jnp.where(keep == constants.NO_INFORMATION, 0, keep)
     crop = jnp.maximum(static, keep).astype(_F32) / 255.0                # [K, C2]
 
@@ -669,18 +593,18 @@ class NavEnv(mjx_env.MjxEnv):
                          limited.astype(_F32)], axis=1)
     ahead = jnp.asarray(AHEAD, _F32)
     ahead_pts = pose[:, None, :2] + ahead[None, :, None] * jnp.stack([c, s], axis=1)[:, None, :]
-    ahead_cap = _mps_cap(task, ahead_pts, r.max_speed)
+    ahead_cap = kernels.mps_cap(task, ahead_pts, r.max_speed)
     ahead_obs = jnp.where(jnp.isfinite(ahead_cap), jnp.minimum(ahead_cap / r.max_speed, 1.0), 1.0)
 
     nav = task.bank.nav
     goal_xy = nav.stations[info["goal"]]
     d = goal_xy - pose[:, :2]
-    gx, gy = _rotate(c, -s, d[:, 0], d[:, 1])
+    gx, gy = kernels.rotate(c, -s, d[:, 0], d[:, 1])
     gdist = jnp.linalg.norm(d, axis=-1)
     goal_obs = jnp.stack([jnp.clip(gx / 5.0, -1, 1), jnp.clip(gy / 5.0, -1, 1),
                           jnp.minimum(gdist / 10.0, 1.0)], axis=1)
     desc = jax.vmap(lambda g, q: navigation.descent_direction(nav, g, q))(info["goal"], pose[:, :2])
-    dx, dy = _rotate(c, -s, desc[:, 0], desc[:, 1])
+    dx, dy = kernels.rotate(c, -s, desc[:, 0], desc[:, 1])
     ndist = jax.vmap(lambda g, q: navigation.nav_value(nav, g, q))(info["goal"], pose[:, :2])
     nav_obs = jnp.stack([dx, dy, jnp.minimum(ndist / 20.0, 1.0)], axis=1)
 
@@ -692,7 +616,7 @@ class NavEnv(mjx_env.MjxEnv):
     dd = jnp.where(jnp.eye(k, dtype=bool), jnp.inf, jnp.linalg.norm(rel, axis=-1))
     j = jnp.argmin(dd, axis=1)
     near = rel[jnp.arange(k), j]
-    ox, oy = _rotate(c, -s, near[:, 0], near[:, 1])
+    ox, oy = kernels.rotate(c, -s, near[:, 0], near[:, 1])
     has = jnp.isfinite(jnp.min(dd, axis=1))
     other_obs = jnp.stack([jnp.where(has, jnp.clip(ox / 3.0, -1, 1), 0.0),
                            jnp.where(has, jnp.clip(oy / 3.0, -1, 1), 0.0),
@@ -714,110 +638,5 @@ class NavEnv(mjx_env.MjxEnv):
     return jnp.concatenate([per.reshape(-1), p.nav.stations.reshape(-1) / scale]).astype(_F32)
 
 
-# ----------------------------------------------------------------------------- randomisation
-
-
-def randomize_zones_and_goals(model: NavModel, rng: jax.Array, *, limit_scale: tuple[float, float] = (0.75, 1.0),
-                              zone_shift: float = 0.5, goal_keep: float = 0.5) -> tuple[NavModel, Any]:
-  """Playground/Brax `randomization_fn`: per-env zone layout, zone limits, zone positions and goals.
-
-  For env i (velocity mode): a layout l_i ~ U{0..L-1} of the env's bank (`NavEnv.create(layouts=L)`:
-  keepout and speed zones at random places and sizes, the speed zones with random limits); every
-  speed mask's base and multiplier scaled by u_i ~ U(limit_scale) (each zone's limit scales by u_i;
-  Nav2 keeps a mask value of 0 as "no limit"); the speed masks' origins moved by
-  U(-zone_shift, zone_shift) m in x and y (the speed zones move; keepout zones stay where the
-  layout's navigation field expects them); and each goal station of layout l_i stays in the goal
-  distribution with probability goal_keep (at least two always do; other layouts' stations never
-  are goals). In navigation mode (one layout, the fleet's planner) the scale and shift apply to
-  the world's speed mask and the planner's per-cell caps instead.
-
-  Args:
-    model: the env's NavModel (`env.mjx_model`).
-    rng: uint32 [N, 2], one key per env (Brax's PPO passes `rng=`).
-    limit_scale: (low, high) with 0 < low <= high <= 1 (a scale above 1 could
-      lift a percent limit over 100, which Nav2 turns into "no limit").
-    zone_shift: m, >= 0.
-    goal_keep: probability in (0, 1].
-
-  Returns:
-    (NavModel with leading axis N on the randomised leaves, in_axes pytree).
-
-  Raises:
-    ValueError: bad ranges or rng shape.
-  """
-  lo, hi = (float(v) for v in limit_scale)
-  if not 0 < lo <= hi <= 1:
-    raise ValueError(f"limit_scale must satisfy 0 < low <= high <= 1; got {limit_scale!r}")
-  if not np.isfinite(zone_shift) or zone_shift < 0:
-    raise ValueError(f"zone_shift must be a finite number >= 0 (m); got {zone_shift!r}")
-  if not 0 < goal_keep <= 1:
-    raise ValueError(f"goal_keep must lie in (0, 1]; got {goal_keep!r}")
-  rng = jnp.asarray(rng)
-  if rng.ndim != 2 or rng.shape[1] != 2:
-    raise ValueError(f"rng must be uint32 [N, 2], one key per env; got shape {tuple(rng.shape)}")
-  task = model.task
-  bank = task.bank
-  nav_mode = task.navigation_mode
-  speed = task.world.speed if nav_mode else bank.speed
-  num_layouts, per = bank.num_layouts, bank.stations_per_layout
-
-  def one(key):
-    k_layout, k_scale, k_shift, k_keep, k_perm = jax.random.split(key, 5)
-    layout = jax.random.randint(k_layout, (), 0, num_layouts, jnp.int32)
-    u = jax.random.uniform(k_scale, (), _F32, lo, hi)
-    shift = jax.random.uniform(k_shift, (2,), _F32, -zone_shift, zone_shift)
-    keep = jax.random.bernoulli(k_keep, goal_keep, (per,))
-    first_two = jnp.zeros((per,), bool).at[jax.random.permutation(k_perm, per)[:2]].set(True)
-    own = jnp.where(keep | first_two, 0.0, -jnp.inf).astype(_F32)
-    logits = jnp.full((num_layouts, per), -jnp.inf, _F32).at[layout].set(own).reshape(-1)
-    info = dataclasses.replace(speed.info, base=speed.info.base * u, multiplier=speed.info.multiplier * u)
-    out = {"layout": layout, "info": info, "origin": speed.origin + shift[None, :], "logits": logits}
-    if nav_mode:
-      out.update(cap=task.world.speed_cap * u, zone_speed=task.world.zone_speed * u)
-    return out
-
-  v = jax.vmap(one)(rng)
-  new_speed = dataclasses.replace(speed, info=v["info"], origin=v["origin"])
-  speed_axes = dataclasses.replace(jax.tree.map(lambda _: None, speed), info=jax.tree.map(lambda _: 0, speed.info),
-                                   origin=0)
-  changes = {"task.goal_logits": v["logits"], "task.layout": v["layout"]}
-  axes = {"task.goal_logits": 0, "task.layout": 0}
-  if nav_mode:
-    changes["task.world"] = dataclasses.replace(task.world, speed=new_speed, speed_cap=v["cap"],
-                                                zone_speed=v["zone_speed"])
-    axes["task.world"] = dataclasses.replace(jax.tree.map(lambda _: None, task.world), speed=speed_axes,
-                                             speed_cap=0, zone_speed=0)
-  else:
-    changes["task.bank"] = dataclasses.replace(bank, speed=new_speed)
-    axes["task.bank"] = dataclasses.replace(jax.tree.map(lambda _: None, bank), speed=speed_axes)
-  v_model = model.tree_replace(changes)
-  in_axes = jax.tree.map(lambda _: None, model).tree_replace(axes)
-  return v_model, in_axes
-
-
-def training_env(scenario: Scenario | None = None, *, randomize: bool, seed: int,
-                 config: NavEnvConfig = NavEnvConfig(), layouts: int = 32,
-                 layout_config: LayoutConfig = LayoutConfig()):
-  """The env and randomization_fn the `jaxfilters rl` commands train and evaluate on.
-
-  Args:
-    scenario: maps (default: the built-in warehouse).
-    randomize: draw zone layouts, limits and goals per episode (`randomize_zones_and_goals`) from
-      a bank of `layouts` layouts (the scenario's own first); False: the scenario's zones only.
-    seed: host seed of the random layouts (evaluation passes seeds training never used, so
-      its layouts are new).
-    config: NavEnvConfig (velocity mode).
-    layouts: L, bank size when randomize.
-    layout_config: how random layouts are drawn.
-
-  Returns:
-    (NavEnv, randomization_fn or None).
-  """
-  if not randomize:
-    return NavEnv.create(scenario, config=config), None
-  env = NavEnv.create(scenario, config=config, layouts=layouts, layout_seed=seed, layout_config=layout_config)
-  return env, randomize_zones_and_goals
-
-
 __all__ = ["AHEAD", "KEEPOUT_MODES", "MODES", "NavEnv", "NavEnvConfig", "NavModel", "NavTask", "State",
-           "clip_command", "nav_model", "randomize_zones_and_goals", "training_env"]
+           "clip_command", "nav_model"]

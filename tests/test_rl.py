@@ -20,7 +20,8 @@ from mujoco_playground._src import mjx_env, wrapper
 from jaxfilters import constants
 from sims.scripts import soak
 from sims.config import FleetConfig
-from sims.rl import NavEnv, NavEnvConfig, clip_command, randomize_zones_and_goals
+from sims.randomization import randomize_zones_and_goals
+from sims.rl import NavEnv, NavEnvConfig, clip_command
 
 TOL = FleetConfig().speed_tolerance
 
@@ -308,8 +309,8 @@ def test_adapter_randomises_each_env_model():
   obs, st = reset(jax.random.split(jax.random.PRNGKey(3), 3))
   assert obs.shape == (3, env.observation_size) and bool(jnp.all(jnp.isfinite(obs)))
   models = [adapter.model_for(jax.tree.map(lambda x: x[i], st.model_leaves)) for i in range(3)]
-  mults = [float(m.task.world.speed.info.multiplier[0]) for m in models]
+  mults = [float(m.task.bank.speed.info.multiplier[0]) for m in models]
   assert len(set(mults)) == 3
   base = env.mjx_model
-  assert models[0].task.world.speed.data.shape == base.task.world.speed.data.shape
-  assert models[0].task.world.speed.resolution.shape == base.task.world.speed.resolution.shape
+  assert models[0].task.bank.speed.data.shape == base.task.bank.speed.data.shape
+  assert models[0].task.bank.speed.resolution.shape == base.task.bank.speed.resolution.shape

@@ -5,7 +5,6 @@ and step are compiled once with the model as an argument, so every layout runs t
 Expected values come from each layout's own masks on the host.
 """
 
-import dataclasses
 
 import jax
 import jax.numpy as jnp
@@ -15,7 +14,8 @@ import pytest
 from jaxfilters import constants
 from sims import navigation
 from sims.layouts import LayoutConfig, layout_scenarios, random_layout
-from sims.rl import NavEnv, NavEnvConfig, randomize_zones_and_goals
+from sims.randomization import randomize_zones_and_goals
+from sims.rl import NavEnv, NavEnvConfig
 from sims.scenario import Scenario
 
 

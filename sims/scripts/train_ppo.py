@@ -56,7 +56,8 @@ def main(argv=None) -> int:
   import jax
 
   from sims.ppo import EVAL_KEYS, GymnaxAdapter, make_ppo, plot_curve, train_with_curve
-  from sims.rl import NavEnv, NavEnvConfig, randomize_zones_and_goals
+  from sims.randomization import randomize_zones_and_goals
+  from sims.rl import NavEnv, NavEnvConfig
   env = NavEnv.create(config=NavEnvConfig(keepout=args.keepout))
   adapter = GymnaxAdapter(env, args.episode_length, randomize_zones_and_goals if args.randomize else None)
   per_iter = args.num_envs * args.num_steps
