@@ -677,3 +677,15 @@ def randomize_zones_and_goals(model: NavModel, rng: jax.Array, *, limit_scale: t
 
 __all__ = ["AHEAD", "KEEPOUT_MODES", "MODES", "NavEnv", "NavEnvConfig", "NavModel", "NavTask", "State",
            "clip_command", "nav_model", "randomize_zones_and_goals"]
+
+
+def training_env(scenario: Scenario | None = None, *, randomize: bool, seed: int,
+                 config: NavEnvConfig = NavEnvConfig()):
+  """The env that `jaxfilters rl train` and `rl eval` build: (NavEnv, randomization_fn or None).
+
+  `seed` is the host seed of station and spawn selection; with `randomize` the
+  second element is `randomize_zones_and_goals` (drawn per episode).
+  """
+  del seed
+  env = NavEnv.create(scenario, config=config)
+  return env, (randomize_zones_and_goals if randomize else None)
