@@ -56,6 +56,7 @@ MAX_MSGPACK_BYTES = 16 * 2 ** 20
 MAX_HIDDEN = 4096          # units per hidden layer
 MAX_LAYERS = 8
 MAX_SIZE = 1 << 20         # observation or action size
+MAX_CONFIG_INT = 1000      # an integer NavEnvConfig field (crop_cells)
 ACTIVATIONS = {"tanh": jnp.tanh, "relu": jax.nn.relu}   # by the __name__ of flax.linen.tanh / relu
 _NORM_EPS = 1e-8           # rejax's normalize_obs: (x - mean) / sqrt(var + 1e-8)
 
@@ -115,13 +116,16 @@ def mean_action(params: dict, activation: str, obs: jax.Array) -> jax.Array:
     obs: float32 [..., D].
   """
   f = ACTIVATIONS[activation]
-  x = (jnp.asarray(obs, jnp.float32) - params["obs_mean"]) / jnp.sqrt(params["obs_var"] + _NORM_EPS)
+  x = jnp.asarray(obs, jnp.float32)
+  lead = (1,) * (x.ndim - 1)           # vectors broadcast over the batch axes explicitly (rank promotion)
+  row = lambda v: jnp.reshape(jnp.asarray(v), lead + (-1,))
+  x = (x - row(params["obs_mean"])) / jnp.sqrt(row(params["obs_var"]) + _NORM_EPS)
   p = params["actor"]["params"]
   layers = p["features"]
   for i in range(len(layers)):
     layer = layers[f"Dense_{i}"]
-    x = f(x @ layer["kernel"] + layer["bias"])
-  mean = x @ p["action_mean"]["kernel"] + p["action_mean"]["bias"]
+    x = f(x @ layer["kernel"] + row(layer["bias"]))
+  mean = x @ p["action_mean"]["kernel"] + row(p["action_mean"]["bias"])
   return jnp.clip(mean, -1.0, 1.0)
 
 
@@ -252,7 +256,13 @@ def _is_int(v) -> bool:
 
 
 def _is_number(v) -> bool:
-  return (isinstance(v, (int, float)) and not isinstance(v, bool)) and math.isfinite(v)
+  """An int or float (not a bool) that is a finite float64."""
+  if isinstance(v, bool) or not isinstance(v, (int, float)):
+    return False
+  try:
+    return math.isfinite(float(v))
+  except OverflowError:         # an int beyond float64
+    return False
 
 
 def _json_value_ok(v, depth: int = 0) -> bool:
@@ -327,8 +337,8 @@ def read_policy_json(path: Path) -> dict:
       ok, want = isinstance(v, bool), "true or false"
     elif isinstance(default, str):
       ok, want = isinstance(v, str), "a string"
-    elif _is_int(default):
-      ok, want = _is_int(v), "an integer"
+    elif _is_int(default):     # counts such as crop_cells: bounded so the env stays buildable
+      ok, want = _is_int(v) and 0 <= v <= MAX_CONFIG_INT, f"an integer in [0, {MAX_CONFIG_INT}]"
     elif isinstance(default, float):
       ok, want = _is_number(v), "a finite number"
     else:                      # a list field (a tuple in NavEnvConfig): JSON values, checked by NavEnvConfig

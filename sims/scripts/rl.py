@@ -73,7 +73,8 @@ Maps, one of three sets (a mix is refused):
 JSON keys: episodes, success (fraction of episodes that reached a goal), goals_per_episode,
 keepout_entries and collisions (totals over all episodes), speed_excess_s (mean seconds per
 episode above the limit in force), mean_return, clipped_per_episode (m of command the speed filter
-clipped), steps_per_episode, policy, seed, map, randomize, episode_length, device, wall_s.
+clipped), steps_per_episode, policy, seed, map, params, randomize, episode_length, device,
+wall_s.
 
 exit codes: 0 ok (rule breaks are reported, not an exit code), 1 internal error (a bug;
 JAXFILTERS_DEBUG=1 shows the traceback), 2 bad option, policy or map file (one line on stderr,
@@ -286,6 +287,9 @@ def run_train(args) -> int:
   ts, evals, timing = train_with_curve(adapter, algo, jax.random.PRNGKey(args.seed), num_calls=num_calls,
                                        num_eval=args.num_eval, callback=progress, mesh=mesh)
   final = {k: v[-1] for k, v in evals.items()}
+  per_env = getattr(ts.last_obs.sharding, "spec", None)     # the env batch's sharding after training
+  placement = {"env_batch": None if per_env is None else [None if a is None else str(a) for a in per_env],
+               "envs_per_device": int(ts.last_obs.addressable_shards[0].data.shape[0])}
   config = {k: (str(v) if isinstance(v, Path) else v) for k, v in vars(args).items() if k != "func"}
   config.update(hidden=list(hidden), env_config=_finite(dataclasses.asdict(env.nav_config)),
                 robots_per_world=env.num_robots, env_steps=steps, calls=num_calls, iterations_per_call=per_call)
@@ -296,7 +300,7 @@ def run_train(args) -> int:
   wall = time.perf_counter() - t_start
   compile_s = timing["compile_train_s"] + timing["compile_eval_s"]
   result = {"trainer": "rejax.PPO", "jax": jax.__version__,
-            "device": {"kind": dev.device_kind, "platform": dev.platform, "count": n_dev},
+            "device": {"kind": dev.device_kind, "platform": dev.platform, "count": n_dev, **placement},
             "timing": {"compile_s": compile_s, **timing, "wall_s": wall,
                        "env_steps_per_s": steps / timing["train_s"] if timing["train_s"] else None},
             "env_steps": steps, "final": final, "initial": {k: v[0] for k, v in evals.items()},
