@@ -319,7 +319,9 @@ def run_train(args) -> int:
 
 # ----------------------------------------------------------------------------- eval
 
-# evaluate_policy's per-episode metrics other than the headline ones, by their output name.
+# evaluate_policy's per-episode metrics other than the headline ones, by their output name (a metric
+# not named here is reported as NAME_per_episode).
+_HEADLINE = ("success", "goals_reached", "keepout_entries", "collisions", "speed_violation_s")
 _OTHER_METRICS = {"return": "mean_return", "clipped": "clipped_per_episode", "length": "steps_per_episode"}
 
 
@@ -369,7 +371,8 @@ def run_eval(args) -> int:
       "keepout_entries": int(round(m["keepout_entries"].sum())),
       "collisions": int(round(m["collisions"].sum())),
       "speed_excess_s": float(m["speed_violation_s"].mean()),
-      **{name: float(m[key].mean()) for key, name in _OTHER_METRICS.items()},
+      **{_OTHER_METRICS.get(key, f"{key}_per_episode"): float(v.mean()) for key, v in m.items()
+         if key not in _HEADLINE},
       "policy": str(args.policy), "seed": args.seed, "map": scenario_args.map_label(args),
       "params": None if args.params is None else str(args.params), "randomize": bool(args.randomize),
       "episode_length": length, "device": jax.devices()[0].device_kind,
