@@ -1,6 +1,6 @@
 """PPO on the fleet RL env (`sims.rl.NavEnv`) with rejax's PPO, and its learning curve.
 
-    python -m sims.scripts.train_ppo --timesteps 400000 --out out/ppo   # needs the `rl` extra
+    jaxfilters rl train --timesteps 400000 --out out/ppo   # needs the `rl` extra
 
 The trainer is rejax 0.1.3 (`rejax.PPO`, maintained, pure JAX: rollouts,
 GAE and updates are one jitted `lax.scan`), chosen because it runs on the
@@ -21,8 +21,18 @@ Evaluation (`evaluate_policy`) runs the policy's mean action (no sampling
 noise) on `num_eval` envs for one episode each and reports, per episode:
 return, success (a goal reached before the episode ended), goals reached,
 keepout entries, collisions, seconds above a speed limit, and the command the
-speed filter had to clip. The training script (sims/scripts/train_ppo.py)
-writes OUT/learning_curve.png and OUT/results.json.
+speed filter had to clip. `jaxfilters rl train` (sims/scripts/rl.py) writes
+the policy (`sims.policy`), OUT/learning_curve.png and OUT/results.json.
+
+Several devices (`train_with_curve(..., mesh=sims.sharding.make_mesh(N))`):
+the train state's per-env leaves (`env_state`, `last_obs`, `last_done`, leading
+axis num_envs) are split over the mesh axis and everything else (networks,
+optimiser, observation statistics, keys) is replicated; rejax's jitted
+training program is compiled with those shardings as its input and output
+shardings and GSPMD partitions it (batch statistics, the advantage
+normalisation and the minibatch shuffle become collectives). The program is
+the same one, so the learning curve per sample is the same as on one device
+up to the order of floating-point sums.
 """
 
 import time
@@ -107,22 +117,64 @@ def mean_policy(algo, ts) -> Callable:
   return act
 
 
-def train_with_curve(adapter: GymnaxAdapter, algo, key: jax.Array, *, num_calls: int, num_eval: int):
+PER_ENV_FIELDS = ("env_state", "last_obs", "last_done")   # rejax train-state fields with leading axis num_envs
+
+
+def train_state_shardings(ts, mesh):
+  """NamedShardings of a rejax on-policy train state over a 1-D mesh (`sims.sharding.make_mesh`).
+
+  The per-env fields (PER_ENV_FIELDS, leading axis num_envs) are split over the
+  mesh axis; every other leaf is replicated.
+
+  Raises:
+    ValueError: num_envs is not a multiple of the mesh's device count.
+  """
+  from sims import sharding
+  num_envs = ts.last_done.shape[0]
+  sharding.check_divisible(num_envs, mesh)
+  rep = sharding.replicated(mesh)
+  split = sharding.worlds_sharding(mesh)
+  out = jax.tree.map(lambda _: rep, ts)
+  return out.replace(**{f: jax.tree.map(lambda _: split, getattr(ts, f)) for f in PER_ENV_FIELDS})
+
+
+def train_with_curve(adapter: GymnaxAdapter, algo, key: jax.Array, *, num_calls: int, num_eval: int,
+                     callback: Callable | None = None, mesh=None):
   """Trains `num_calls` x `algo.total_timesteps` env steps, evaluating before and after each call.
 
+  Args:
+    adapter, algo: from `make_ppo`.
+    key: PRNG key (init and evaluation keys are split from it).
+    num_calls: training calls; an evaluation follows each (and one precedes the first).
+    num_eval: episodes per evaluation.
+    callback: optional `callback(point)` after each evaluation, with `point` a dict
+      of that evaluation's means (EVAL_KEYS), `env_steps`, `index` (0 = before
+      training), `train_s` (cumulative) and `steps_per_s` (the last call's env
+      steps per second; 0.0 at index 0).
+    mesh: optional 1-D device mesh: the env batch is sharded over it (see the
+      module docstring); num_envs must be a multiple of its size.
+
   Returns:
-    (final train state, evals: dict name -> float list [num_calls + 1], timing dict).
+    (final train state, evals: dict name -> float list [num_calls + 1], timing dict
+    with compile_train_s, compile_eval_s, train_s).
   """
   with jax.numpy_rank_promotion("allow"):     # rejax broadcasts [N, D] - [D] internally
-    return _train_with_curve(adapter, algo, key, num_calls=num_calls, num_eval=num_eval)
+    return _train_with_curve(adapter, algo, key, num_calls=num_calls, num_eval=num_eval, callback=callback,
+                             mesh=mesh)
 
 
-def _train_with_curve(adapter, algo, key, *, num_calls, num_eval):
+def _train_with_curve(adapter, algo, key, *, num_calls, num_eval, callback, mesh):
   k_init, k_eval = jax.random.split(key)
-  train = jax.jit(lambda ts: algo.train(train_state=ts)[0])
   evaluate = jax.jit(lambda ts, k: {n: jnp.mean(v) for n, v in
                                     evaluate_policy(adapter, mean_policy(algo, ts), k, num_eval).items()})
   ts = jax.jit(algo.init_state)(k_init)
+  if mesh is None:
+    train = jax.jit(lambda ts: algo.train(train_state=ts)[0])
+  else:
+    shardings = train_state_shardings(ts, mesh)
+    ts = jax.device_put(ts, shardings)
+    train = jax.jit(lambda ts: algo.train(train_state=ts)[0], in_shardings=(shardings,),
+                    out_shardings=shardings)
   t0 = time.perf_counter()
   train_c = train.lower(ts).compile()
   t1 = time.perf_counter()
@@ -131,19 +183,24 @@ def _train_with_curve(adapter, algo, key, *, num_calls, num_eval):
   evals = {n: [] for n in (*EVAL_KEYS, "env_steps")}
   train_s = 0.0
 
-  def record(ts, i):
+  def record(ts, i, call_s):
     out = eval_c(ts, jax.random.fold_in(k_eval, i))
     for n, v in out.items():
       evals[n].append(float(v))
     evals["env_steps"].append(float(ts.global_step))
+    if callback is not None:
+      point = {n: v[-1] for n, v in evals.items()}
+      per_call = evals["env_steps"][-1] - (evals["env_steps"][-2] if i else evals["env_steps"][-1])
+      callback({**point, "index": i, "train_s": train_s, "steps_per_s": per_call / call_s if call_s else 0.0})
 
-  record(ts, 0)
+  record(ts, 0, 0.0)
   for i in range(num_calls):
     t = time.perf_counter()
     ts = train_c(ts)
     jax.block_until_ready(ts)
-    train_s += time.perf_counter() - t
-    record(ts, i + 1)
+    call_s = time.perf_counter() - t
+    train_s += call_s
+    record(ts, i + 1, call_s)
   timing = {"compile_train_s": t1 - t0, "compile_eval_s": t2 - t1, "train_s": train_s}
   return ts, evals, timing
 

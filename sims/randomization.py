@@ -100,26 +100,33 @@ def randomize_zones_and_goals(model: NavModel, rng: jax.Array, *, limit_scale: t
 
 
 def training_env(scenario: Scenario | None = None, *, randomize: bool, seed: int,
-                 config: NavEnvConfig = NavEnvConfig(), layouts: int = 32,
-                 layout_config: LayoutConfig = LayoutConfig()):
+                 config: NavEnvConfig = NavEnvConfig(), layouts: int = 16,
+                 layout_config: LayoutConfig = LayoutConfig(), evaluation: bool = False):
   """The env and randomization_fn the `jaxfilters rl` commands train and evaluate on.
 
   Args:
     scenario: maps (default: the built-in warehouse).
     randomize: draw zone layouts, limits and goals per episode (`randomize_zones_and_goals`) from
       a bank of `layouts` layouts (the scenario's own first); False: the scenario's zones only.
-    seed: host seed of the random layouts (evaluation passes seeds training never used, so
-      its layouts are new).
+    seed: seed of the random layouts. Training uses layout seed 2 * seed and evaluation
+      2 * seed + 1, so an evaluation never draws the random layouts a training run drew.
     config: NavEnvConfig (velocity mode).
-    layouts: L, bank size when randomize.
+    layouts: L >= 1, bank size when randomize.
     layout_config: how random layouts are drawn.
+    evaluation: the env is for evaluation (see seed).
 
   Returns:
     (NavEnv, randomization_fn or None).
+
+  Raises:
+    ValueError: layouts < 1, a negative seed, or a scenario the env cannot be built on.
   """
+  if isinstance(seed, bool) or int(seed) != seed or seed < 0:
+    raise ValueError(f"seed must be an integer >= 0; got {seed!r}")
   if not randomize:
     return NavEnv.create(scenario, config=config), None
-  env = NavEnv.create(scenario, config=config, layouts=layouts, layout_seed=seed, layout_config=layout_config)
+  env = NavEnv.create(scenario, config=config, layouts=layouts, layout_seed=2 * int(seed) + int(bool(evaluation)),
+                      layout_config=layout_config)
   return env, randomize_zones_and_goals
 
 

@@ -62,7 +62,7 @@ from PIL import Image
 
 from jaxfilters.grid import OccupancyGrid
 from jaxfilters.map_io import load_map, load_map_image
-from tests import fuzz_jaus, fuzz_params, fuzz_poses
+from tests import fuzz_jaus, fuzz_params, fuzz_policy, fuzz_poses
 
 OK_OUTCOMES = ("loaded", "ValueError", "FileNotFoundError")
 MAX_MESSAGE = 1000
@@ -509,6 +509,10 @@ TARGETS: dict[str, Target] = {
     "params": Target(fuzz_params.run, fuzz_params.seeds, fuzz_params.edit),
     "poses": Target(lambda d: fuzz_poses.run(d, workdir()), lambda: [Seed(d) for d in fuzz_poses.seeds()],
                     fuzz_poses.edit),
+    "policy-json": Target(fuzz_policy.run_json, lambda: [Seed(d) for d in fuzz_policy.json_seeds()],
+                          fuzz_policy.json_edit),
+    "policy-msgpack": Target(fuzz_policy.run_msgpack, lambda: [Seed(d) for d in fuzz_policy.msgpack_seeds()],
+                             fuzz_policy.msgpack_edit),
 }
 
 

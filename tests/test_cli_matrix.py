@@ -120,14 +120,6 @@ def test_help_texts_have_examples_and_exit_codes(capsys):
   assert "examples:" in text and "exit codes:" in text
 
 
-def test_train_ppo_options_all_have_help():
-  from sims.scripts import train_ppo
-  parser = train_ppo.build_parser()
-  missing = [a.option_strings for a in parser._actions if not a.help]  # noqa: SLF001 - argparse's list
-  assert not missing, missing
-  assert "examples:" in parser.format_help() and "exit codes:" in parser.format_help()
-
-
 def test_query_and_fleet_share_speed_defaults(tmp_path, capsys):
   """`query --speed M.yaml` and `fleet --speed M.yaml` read the same mask with the same info."""
   poses = tmp_path / "F.csv"

@@ -5,11 +5,12 @@ pyproject.toml):
 
 * `jaxfilters fleet` (`sims.scripts.fleet`): simulate a fleet, write pictures and a summary.
 * `jaxfilters bench` (`sims.scripts.bench`): the benchmark harness of a checkout.
+* `jaxfilters rl` (`sims.scripts.rl`): `train` a PPO policy on the RL env, `eval` a saved one on any map
+  (the `rl` extra).
 
 Run as `python -m sims.scripts.NAME`:
 
 * `soak`: many chunks of fleet steps with the rules and memory checked after each.
-* `train_ppo`: PPO (rejax) on the RL env, with its learning curve (the `rl` extra).
 * `make_default_scenario`: regenerates the built-in warehouse in sims/assets.
 * `soft_tuning`: a speed-zone limit tuned with jax.grad, re-checked with the real filters.
 * `sharding`: one process of a multi-process sharded rollout.

@@ -32,6 +32,7 @@ from pathlib import Path
 
 from jaxfilters import cli as jcli
 from jaxfilters.cli import EXIT_OK, EXIT_VIOLATION, CliError
+from sims.scripts import scenario_args
 
 
 class _Progress:
@@ -104,12 +105,7 @@ def register_fleet(sub) -> argparse.ArgumentParser:
   g.add_argument("--seconds", type=float, default=None,
                  help="simulated seconds, rounded to whole env steps of 0.2 s (default 120)")
   g.add_argument("--steps", type=int, default=None, help="env steps of 1/costmap_hz (0.2 s) each")
-  m = p.add_argument_group("maps from files (default: the built-in warehouse)")
-  m.add_argument("--map", type=Path, default=None, help="Nav2 map YAML of the static map")
-  m.add_argument("--keepout", type=Path, default=None, help="keepout mask YAML (Nav2 type 0)")
-  m.add_argument("--speed", type=Path, default=None, help="speed mask YAML")
-  jcli.add_speed_options(m)
-  jcli.add_params_options(p)
+  scenario_args.add_map_options(p)
   p.add_argument("--seed", type=int, default=0, help="PRNG seed (default 0)")
   p.add_argument("--out", type=Path, default=Path("out/fleet"), help="output folder (default out/fleet)")
   p.add_argument("--animate", action="store_true", help="also write fleet.gif")
@@ -166,7 +162,7 @@ def _check_fleet_args(args) -> None:
   if args.robots_in_keepout and args.keepout_escape == "off":
     raise CliError("--robots-in-keepout needs --keepout-escape center or footprint (without escape mode a "
                    "robot started in a zone is deadlocked)")
-  _check_map_args(args)
+  scenario_args.check_map_args(args)
   _check_bag_args(args)
 
 
@@ -195,56 +191,6 @@ def _check_bag_args(args) -> None:
     check_bag_dir(args.bag, overwrite=args.overwrite)
   except BagError as e:
     raise CliError(str(e)) from None
-
-
-def _check_map_args(args) -> None:
-  """The map options form one of the three documented sets; nothing given is ignored."""
-  speed_opts = jcli.given_speed_options(args)
-  if args.params is not None:
-    given = [f"--{n}" for n in ("keepout", "speed") if getattr(args, n) is not None] + speed_opts
-    if given:
-      raise CliError(f"{given[0]} cannot be combined with --params (the params file gives the masks and the "
-                     "speed filter's type, base and multiplier; give a mask server's file with --mask NODE=MAP.yaml)")
-    if args.map is None:
-      raise CliError("--params needs --map M.yaml (the static map the robots drive on)")
-  else:
-    jcli.check_params_options(args)
-    maps = (args.map, args.keepout, args.speed)
-    if any(m is not None for m in maps) and not all(m is not None for m in maps):
-      raise CliError("give all three of --map, --keepout and --speed, or --map with --params "
-                     "(or none for the built-in warehouse)")
-    if speed_opts and args.speed is None:
-      raise CliError(f"{speed_opts[0]} needs --speed M.yaml (the built-in warehouse's speed zones are fixed)")
-    if args.speed is not None:
-      jcli.speed_info(args)
-  for name in ("map", "keepout", "speed", "params"):
-    p = getattr(args, name)
-    if p is not None and not Path(p).is_file():
-      raise CliError(f"--{name} {p}: no such file" if not Path(p).exists() else f"--{name} {p}: not a file")
-
-
-def _scenario_from_params(args):
-  """The Scenario of --map with --params' keepout and speed filters (both present and enabled)."""
-  from sims.scenario import Scenario
-  costmap = jcli.params_costmap(args, "fleet")
-  where = f"--params {args.params}: {costmap.name}"
-  for kind, f in (("keepout", costmap.keepout), ("speed", costmap.speed)):
-    if f is None:
-      raise CliError(f"{where} has no {kind} filter; the fleet runs a keepout and a speed filter")
-    if not f.enabled:
-      raise CliError(f"{where} filter '{f.name}' is disabled (enabled: false); the fleet runs it always "
-                     "(enable it, e.g. with --set for a launch placeholder)")
-  if costmap.foreign_frames():
-    raise CliError(f"{where}: its masks are in frame {costmap.foreign_frames()[0]!r}, not the costmap's "
-                   f"{costmap.global_frame!r}; the fleet simulates one frame")
-  speed = costmap.speed
-  if speed.percentage is None:
-    raise CliError(f"{where} speed filter '{speed.name}': its info type is not 1 or 2 (a speed filter's)")
-  import numpy as np
-  info = speed.mask.info
-  base, mult = float(np.asarray(info.base).reshape(-1)[0]), float(np.asarray(info.multiplier).reshape(-1)[0])
-  return Scenario.load(args.map, costmap.keepout.mask_yaml, speed.mask_yaml,
-                       speed_type=1 if speed.percentage else 2, speed_base=base, speed_multiplier=mult)
 
 
 def _steps_and_chunks(args, step_s: float) -> tuple[int, int]:
@@ -362,7 +308,6 @@ def run_fleet(args) -> int:
   from sims.env import FleetEnv
   from sims.metrics import summarize
   from sims.render import render_gif, render_png
-  from sims.scenario import Scenario
 
   _check_fleet_args(args)
   k = args.robots_per_world or (args.robots if args.robots <= 64 else
@@ -373,17 +318,7 @@ def run_fleet(args) -> int:
     raise CliError(f"--robots-in-keepout ({args.robots_in_keepout}) counts robots per world; it must be <= the "
                    f"robots per world ({k})")
   out = _prepare_out(Path(args.out))
-  try:
-    if args.params is not None:
-      scenario = _scenario_from_params(args)
-    elif args.map is None:
-      scenario = Scenario.default()
-    else:
-      speed_type, speed_base, speed_multiplier = jcli.speed_info(args)
-      scenario = Scenario.load(args.map, args.keepout, args.speed, speed_type=speed_type,
-                               speed_base=speed_base, speed_multiplier=speed_multiplier)
-  except (FileNotFoundError, ValueError) as e:
-    raise CliError(str(e).splitlines()[0] if str(e) else type(e).__name__) from None
+  scenario = scenario_args.scenario_from_args(args, "fleet")
   escape = args.keepout_escape != "off"
   try:
     config = FleetConfig(robots_per_world=k, impl=args.impl, keepout_escape=args.keepout_escape,
@@ -438,7 +373,7 @@ def run_fleet(args) -> int:
                       footprint=escape)
   summary["scenario"] = {
       "name": scenario.name,
-      "map": str(args.map) if args.map else "built-in (sims/assets/default_map.yaml)",
+      "map": scenario_args.map_label(args),
       "params": None if args.params is None else str(args.params),
       "resolution_m": scenario.map.resolution, "size_cells": list(scenario.map.data.shape[::-1]),
       "speed_filter": {"type": scenario.speed_type, "base": scenario.speed_base,
