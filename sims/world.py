@@ -298,7 +298,16 @@ def build_world(scenario: Scenario, config: FleetConfig, *, seed: int = 0) -> Wo
   ox, oy = float(grid.origin[0]), float(grid.origin[1])
   # Station and spawn candidates: coarse cells whose fine cells are all cost 0 (clear of
   # the inflation radius around obstacles and keepout zones).
-  clear = (~blocked) & (weight == 1.0)
+  # A map whose free space runs to its edge (Nav2's warehouse) has no wall there, but a robot
+  # cannot leave the map: cells closer to the edge than the inflation radius host no station or
+  # spawn point.
+  hn, wn = blocked.shape
+  cx = (np.arange(wn) + 0.5) * nav_res
+  cy = (np.arange(hn) + 0.5) * nav_res
+  width, height = grid.data.shape[1] * res, grid.data.shape[0] * res
+  inside = (np.minimum(cy, height - cy)[:, None] >= config.inflation_radius) & \
+      (np.minimum(cx, width - cx)[None, :] >= config.inflation_radius)
+  clear = (~blocked) & (weight == 1.0) & inside
   cr, cc = np.nonzero(clear)
   if len(cr) < config.num_stations:
     raise ValueError(f"the map has {len(cr)} clear navigation cells; need at least "
@@ -357,7 +366,7 @@ def build_world(scenario: Scenario, config: FleetConfig, *, seed: int = 0) -> Wo
                          f"robots_in_keepout = {config.robots_in_keepout}")
   chosen = pick(clear & reachable, zone_spawns.astype(np.float64))
   if len(chosen) - len(zone_spawns) < config.robots_per_world:
-    chosen = pick(~blocked & ~clear & reachable, chosen)
+    chosen = pick(~blocked & ~clear & reachable & inside, chosen)
   spawns = chosen[len(zone_spawns):].astype(np.float32)       # >= SPAWN_SPACING from every zone spawn
   if len(spawns) < config.robots_per_world:
     raise ValueError(f"the map has room for {len(spawns)} robots per world (free cells clear of "

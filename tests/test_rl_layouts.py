@@ -140,3 +140,18 @@ def test_step_reads_the_envs_own_layout(bank_env):
     out = step(model, st, jnp.zeros((2,), jnp.float32))
     entries[l] = (float(out.metrics["keepout_entries"]), float(out.done))
   assert entries == {1: (1.0, 1.0), 0: (0.0, 0.0), 2: (0.0, 0.0)}, entries
+
+
+def test_stations_and_spawns_keep_off_a_free_map_edge():
+  # A map whose free space runs to its edge (Nav2's warehouse does at its bottom row) had stations and
+  # spawn points a few cm from the edge: a robot started there left the map in its first step.
+  from jaxfilters.grid import OccupancyGrid
+  from sims.config import FleetConfig
+  from sims.world import build_world
+  free = OccupancyGrid.create(np.zeros((160, 200), np.int8), 0.05, (-5.0, -4.0, 0.0))
+  sc = Scenario(name="open", map=free, keepout=free, speed=free)
+  cfg = FleetConfig(robots_per_world=2, num_stations=8)
+  w = build_world(sc, cfg, seed=0)
+  for pts in (w.stations, w.spawns):
+    edge = np.minimum.reduce([pts[:, 0] + 5.0, 5.0 - pts[:, 0], pts[:, 1] + 4.0, 4.0 - pts[:, 1]])
+    assert edge.min() >= cfg.inflation_radius - 1e-6, edge.min()
