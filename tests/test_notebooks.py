@@ -5,6 +5,10 @@ notebooks name) from notebooks/ (they read ../BENCHMARKS.md and, when present,
 ../../shared/maps/nav2), and writes the executed copy to a temporary folder: the committed
 notebooks are never rewritten by the tests. Each notebook checks its own numbers against an
 independent reference in its cells (asserts), so a wrong result fails here as a cell error.
+
+The kernel gets JAXFILTERS_NOTEBOOK_QUICK=1: notebooks whose sweeps compile one program per
+setting (02, 03) then run fewer settings through the same cells; with the variable unset they run
+as committed.
 """
 
 import base64
@@ -55,9 +59,10 @@ def test_committed_with_outputs_that_read_on_a_code_host(path):
 @pytest.mark.slow
 @pytest.mark.parametrize("path", NOTEBOOKS, ids=lambda p: p.stem)
 def test_notebook_runs_top_to_bottom(path, tmp_path, monkeypatch):
-  # The kernel is a child process: it inherits PYTHONPATH (this checkout's code first) and the
-  # XLA_FLAGS tests/conftest.py chose.
+  # The kernel is a child process: it inherits PYTHONPATH (this checkout's code first), the
+  # XLA_FLAGS tests/conftest.py chose and the quick-run switch.
   monkeypatch.setenv("PYTHONPATH", os.pathsep.join([str(ROOT)] + [p for p in [os.environ.get("PYTHONPATH")] if p]))
+  monkeypatch.setenv("JAXFILTERS_NOTEBOOK_QUICK", "1")
   nb = nbformat.read(path, as_version=4)
   client = NotebookClient(nb, timeout=600, kernel_name="python3",
                           resources={"metadata": {"path": str(path.parent)}})
