@@ -51,7 +51,7 @@ _F32 = jnp.float32
 
 
 EVAL_KEYS = ("return", "success", "goals_reached", "keepout_entries", "collisions",
-             "speed_violation_s", "clipped", "length")
+             "speed_violation_s", "speed_violation_after_clip_s", "clipped", "length")
 
 
 def evaluate_policy(adapter: GymnaxAdapter, act: Callable, key: jax.Array, num_eval: int) -> dict:
@@ -72,6 +72,7 @@ def evaluate_policy(adapter: GymnaxAdapter, act: Callable, key: jax.Array, num_e
       m = nst.metrics
       add = {"return": nst.reward, "goals_reached": m["goals_reached"], "keepout_entries": m["keepout_entries"],
              "collisions": m["collisions"], "speed_violation_s": m["speed_violation_s"],
+             "speed_violation_after_clip_s": m["speed_violation_after_clip_s"],
              "clipped": m["clipped"], "length": jnp.ones((), _F32)}
       acc = {n: acc[n] + jnp.where(alive, add[n], 0.0) for n in acc}
       return (nst, alive & (nst.done == 0), acc), None

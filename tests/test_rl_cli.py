@@ -34,7 +34,7 @@ REPO = Path(__file__).resolve().parents[1]
 ASSETS = REPO / "sims" / "assets"
 TRAIN_ARGS = ["--timesteps", "64", "--num-envs", "4", "--num-steps", "8", "--episode-length", "6", "--evals", "1",
               "--num-eval", "2", "--hidden", "16", "--randomize", "--seed", "3"]
-EVAL_KEYS = ("episodes", "success", "goals_per_episode", "keepout_entries", "collisions", "speed_excess_s",
+EVAL_KEYS = ("episodes", "success", "goals_per_episode", "keepout_entries", "collisions", "speed_excess_s", "speed_excess_after_clip_s",
              "mean_return", "clipped_per_episode", "steps_per_episode", "seed", "map", "randomize", "device",
              "wall_s")
 
@@ -131,7 +131,7 @@ def test_eval_json_has_the_figures(trained, capsys):
   assert set(EVAL_KEYS) <= set(res), sorted(set(EVAL_KEYS) - set(res))
   assert res["episodes"] == 3 and res["seed"] == 5 and res["randomize"] is True
   assert 0.0 <= res["success"] <= 1.0
-  assert res["keepout_entries"] >= 0 and res["collisions"] >= 0 and res["speed_excess_s"] >= 0
+  assert res["keepout_entries"] >= 0 and res["collisions"] >= 0 and res["speed_excess_s"] >= 0 and res["speed_excess_after_clip_s"] >= 0
   assert isinstance(res["keepout_entries"], int) and isinstance(res["collisions"], int)
   assert 1 <= res["steps_per_episode"] <= 6
   assert all(math.isfinite(res[k]) for k in ("mean_return", "goals_per_episode", "clipped_per_episode"))

@@ -72,9 +72,10 @@ Maps, one of three sets (a mix is refused):
 
 JSON keys: episodes, success (fraction of episodes that reached a goal), goals_per_episode,
 keepout_entries and collisions (totals over all episodes), speed_excess_s (mean seconds per
-episode above the limit in force), mean_return, clipped_per_episode (m of command the speed filter
-clipped), steps_per_episode, policy, seed, map, params, randomize, episode_length, device,
-wall_s.
+episode above the limit in force), speed_excess_after_clip_s (total seconds above a limit the
+speed filter had already published at the last 20 Hz tick: 0 when every excess falls in the tick
+a zone is entered), mean_return, clipped_per_episode (m of command the speed filter clipped),
+steps_per_episode, policy, seed, map, params, randomize, episode_length, device, wall_s.
 
 exit codes: 0 ok (rule breaks are reported, not an exit code), 1 internal error (a bug;
 JAXFILTERS_DEBUG=1 shows the traceback), 2 bad option, policy or map file (one line on stderr,
@@ -330,7 +331,8 @@ def run_train(args) -> int:
 
 # evaluate_policy's per-episode metrics other than the headline ones, by their output name (a metric
 # not named here is reported as NAME_per_episode).
-_HEADLINE = ("success", "goals_reached", "keepout_entries", "collisions", "speed_violation_s")
+_HEADLINE = ("success", "goals_reached", "keepout_entries", "collisions", "speed_violation_s",
+             "speed_violation_after_clip_s")
 _OTHER_METRICS = {"return": "mean_return", "clipped": "clipped_per_episode", "length": "steps_per_episode"}
 
 
@@ -381,6 +383,9 @@ def run_eval(args) -> int:
       "keepout_entries": int(round(m["keepout_entries"].sum())),
       "collisions": int(round(m["collisions"].sum())),
       "speed_excess_s": float(m["speed_violation_s"].mean()),
+      # Above the limit the speed filter had already published at the last controller tick: the
+      # clip held from the tick after a zone was entered; 0 means every excess is an entry tick's.
+      "speed_excess_after_clip_s": float(m["speed_violation_after_clip_s"].sum()),
       **{_OTHER_METRICS.get(key, f"{key}_per_episode"): float(v.mean()) for key, v in m.items()
          if key not in _HEADLINE},
       "policy": str(args.policy), "seed": args.seed, "map": scenario_args.map_label(args),
