@@ -30,8 +30,9 @@ demo: $(BASE_STAMP)
 readme-picture: demo
 	$(PY) -m sims.scripts.readme_picture out/demo docs/demo.png
 
+# Two worker processes, each taking whole files (their shared compiled fixtures stay in one process).
 test: $(TEST_STAMP)
-	$(PY) -m pytest -q tests
+	$(PY) -m pytest -q -n 2 --dist loadfile tests
 
 bench: $(TEST_STAMP)
 	$(PY) -m benchmarks

@@ -159,11 +159,38 @@ def rl_rows(run: dict, seen: set) -> list[list[str]]:
   return rows
 
 
+def rl_train_rows(run: dict, seen: set) -> list[list[str]]:
+  """Rows of a `jaxfilters rl train` run (its results.json timing) and, with `devices_1`, the same
+  command on one device of the same machine (the scaling baseline)."""
+  f = run["figures"]
+  key = f"rl_train_{f['devices']}"
+  if key in seen:
+    return []
+  seen.add(key)
+  t = f["timing"]
+  ev = f.get("eval")
+  base = []
+  if "devices_1" in f:
+    one = f["devices_1"]["env_steps_per_s"]
+    base.append(f"1 device, same call: {rate(one, 'env-steps/s')} (x{num(t['env_steps_per_s'] / one)})")
+  if ev:
+    base.append(f"eval {ev['episodes']:,} episodes, new layouts: {num(100 * ev['success'])} % success, "
+                f"{ev['keepout_entries']} keepout entries, {ev['collisions']} collisions")
+  label = ("PPO to a policy (`jaxfilters rl train --randomize`)" if f["devices"] == 1 else
+           f"PPO over {f['devices']} GPUs, env batch sharded (`rl train --devices {f['devices']}`)")
+  rows = [[label, f"{f['envs']:,} envs x {f['rollout_steps']} steps, {num(f['env_steps'] / 1e6)} M env steps",
+           seconds(t["compile_s"], 0), f"{num(t['train_s'])} s train, {num(t['wall_s'])} s wall",
+           f"**{rate(t['env_steps_per_s'], 'env-steps/s')}**", "; ".join(base), "", run["id"]]]
+  return rows
+
+
 def device_table(data: dict) -> str:
   """One device's section: heading, table, and the runs its figures come from."""
   seen, rows = set(), []
   for run in data["runs"]:
-    rows += harness_rows(run, seen) if run["harness"] == "benchmarks.run" else rl_rows(run, seen)
+    kind = run["harness"]
+    rows += (harness_rows(run, seen) if kind == "benchmarks.run" else
+             rl_train_rows(run, seen) if kind == "rl_train" else rl_rows(run, seen))
   head = ["figure", "size", "compile", "steady", "throughput", "baselines (same run)", "roofline", "run"]
   lines = [f"## {data['device']} ({data['environment']})", "",
            "| " + " | ".join(head) + " |", "| " + " | ".join("---" for _ in head) + " |"]

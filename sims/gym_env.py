@@ -104,7 +104,7 @@ from gymnasium.vector import AutoresetMode
 from gymnasium.vector.utils import batch_space
 
 from sims.adapter import AdapterState, GymnaxAdapter
-from sims.randomization import randomize_zones_and_goals
+from sims.randomization import randomize_zones_and_goals, training_env
 from sims.rl import NavEnv
 
 OBS_BOUND = 1.0 + 1e-4      # Box bound of every observation entry (normalised to [-1, 1], plus rounding room)
@@ -127,7 +127,8 @@ def _resolve(env, episode_length, randomize, randomization_fn, render_mode, who)
     raise ValueError(f"{who}: randomization_fn is used only with randomize=True; pass both")
   if isinstance(episode_length, bool) or not isinstance(episode_length, numbers.Integral) or episode_length < 1:
     raise ValueError(f"{who}: episode_length must be an integer >= 1 (env steps); got {episode_length!r}")
-  env = NavEnv.create() if env is None else env
+  if env is None:     # the rl commands' env: with randomize, the built-in warehouse and 16 zone layouts
+    env, _ = training_env(randomize=randomize, seed=0)
   if not isinstance(env, NavEnv):
     raise ValueError(f"{who}: env must be a sims.rl.NavEnv; got {type(env).__name__}")
   if env.nav_config.mode != "velocity":
@@ -245,7 +246,7 @@ class NavVectorEnv(gymnasium.vector.VectorEnv):
     episode_length: env steps of 0.2 s per episode (the time limit; `truncated`).
     randomize: draw zones and goals per episode (`randomization_fn`, by default
       `sims.randomization.randomize_zones_and_goals`).
-    env: the `NavEnv` to batch (default `NavEnv.create()`, the built-in warehouse, 1 robot).
+    env: the `NavEnv` to batch (default: the built-in warehouse, 1 robot; with randomize, 16 zone layouts, as `sims.randomization.training_env`).
     randomization_fn: Playground `fn(model, rng) -> (model_v, in_axes)`; only with randomize=True.
     render_mode: None (the env does not render).
 
@@ -363,7 +364,7 @@ class NavGymEnv(gymnasium.Env):
     episode_length: env steps of 0.2 s per episode (the time limit; `truncated`).
     randomize: draw zones and goals at each reset (`randomization_fn`, by default
       `sims.randomization.randomize_zones_and_goals`).
-    env: the `NavEnv` (default `NavEnv.create()`); wrappers of one NavEnv with the
+    env: the `NavEnv` (default: as NavVectorEnv); wrappers of one NavEnv with the
       same settings share one compiled program.
     randomization_fn: Playground `fn(model, rng) -> (model_v, in_axes)`; only with randomize=True.
     render_mode: None (the env does not render).

@@ -175,7 +175,7 @@ class NavTask:
     world: WorldParams of the scenario (navigation mode drives the fleet on it).
     static_inflated: uint8 [H, W], the static layer inflated (no keepout), on the map grid.
     goal_logits: float32 [L * S], log-weights of drawing each station of the bank as a goal
-      (-inf never; `randomize_zones_and_goals` leaves only the env's layout finite).
+      (-inf never); an env draws among its own layout's stations only.
     bank: LayoutBank of L zone layouts (L = 1: the scenario's own zones); velocity mode reads
       its masks, navigation fields, stations and spawns.
     layout: int32 [], the bank layout this env drives in (randomised per env).
@@ -237,8 +237,8 @@ class NavEnv(mjx_env.MjxEnv):
     static = static_layer(jnp.asarray(w.scenario.map.data)[None], config=STATIC_LAYER)
     inflated = np.asarray(inflate(static, config=w.inflation)[0])
     task = NavTask(world=w.params, static_inflated=jnp.asarray(inflated),
-                   goal_logits=jnp.where(jnp.arange(bank.nav.stations.shape[0]) < bank.stations_per_layout,
-                                         0.0, -jnp.inf).astype(_F32),
+                   # Every station of every layout may be a goal: an env draws only among its own layout's.
+                   goal_logits=jnp.zeros((bank.nav.stations.shape[0],), _F32),
                    bank=bank, layout=jnp.zeros((), jnp.int32), navigation_mode=config.mode == "navigation")
     self._mjx_model = nav_model(fleet.mjx_model, task)
     self._crop = self._crop_offsets()

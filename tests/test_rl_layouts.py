@@ -155,3 +155,23 @@ def test_stations_and_spawns_keep_off_a_free_map_edge():
   for pts in (w.stations, w.spawns):
     edge = np.minimum.reduce([pts[:, 0] + 5.0, 5.0 - pts[:, 0], pts[:, 1] + 4.0, 4.0 - pts[:, 1]])
     assert edge.min() >= cfg.inflation_radius - 1e-6, edge.min()
+
+
+def test_goals_in_a_chosen_layout_are_that_layouts_stations(bank_env):
+  # An env put in layout 2 without the randomisation had every goal weight -inf there: it drew
+  # station 0 of the layout forever and counted a goal on every step spent on it.
+  env, reset, step = bank_env
+  s = env.mjx_model.task.bank.stations_per_layout
+  model = _model(env, 2)
+  st = reset(model, jax.random.PRNGKey(7))
+  goals = set()
+  for i in range(3):
+    goal = int(st.info["goal"][0])
+    goals.add(goal)
+    assert 2 * s <= goal < 3 * s
+    target = np.asarray(env.mjx_model.task.bank.nav.stations[goal])
+    qpos = st.data.qpos.at[0, :2].set(jnp.asarray(target))
+    st = st.replace(data=st.data.replace(qpos=qpos), info=dict(st.info, last_qpos=qpos))
+    st = step(model, st, jnp.zeros((2,), jnp.float32))
+    assert float(st.metrics["goals_reached"]) == 1.0
+    assert int(st.info["goal"][0]) != goal                      # a new goal, not the one just reached
