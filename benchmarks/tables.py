@@ -7,7 +7,7 @@
 benchmarks/results/<device>.json holds the latest runs of one device: each run has its date,
 command, commit (where known), baseline and the figures in the shape its harness writes
 (`results` from `python -m benchmarks --json`, `figures` from `python -m benchmarks.rl_bench
---json`). A figure appears in the table from the first run in the file that has it, so a new run
+--json`, or, for harness `rl_train`, the timing of `jaxfilters rl train`'s results.json). A figure appears in the table from the first run in the file that has it, so a new run
 goes first in `runs` and replaces the figures it measured; the older runs keep the rest. To add a
 run, put its JSON object (with `id`, `date`, `command`, `commit`, `baseline`, `harness`) at the
 front of the device's `runs` and run `--write`.
