@@ -90,7 +90,7 @@ def _json_text_edit(text: str, rng: random.Random) -> str:
     depth = rng.choice((9, 50, 5000))
     return text.replace('"extra": {', '"extra": {"deep": ' + "[" * depth + "]" * depth + ", ", 1)
   if op == 3:
-    return text[:rng.randrange(len(text))]
+    return text[:rng.randrange(len(text))] if text else "{"
   return text.replace('"', "'", rng.randint(1, 3))
 
 
@@ -156,7 +156,8 @@ def msgpack_edit(data: bytes, rng: random.Random) -> bytes:
     node[key] = a.astype(rng.choice((np.float64, np.float16, np.int32, np.uint8, np.bool_, np.complex64)))
   elif op == 4 and isinstance(a, np.ndarray) and a.size:
     b = a.copy()
-    b.reshape(-1)[rng.randrange(b.size)] = rng.choice((np.nan, np.inf, -np.inf, -1.0, 3.4e38))
+    bad = (np.nan, np.inf, -np.inf, -1.0, 3.4e38) if np.issubdtype(b.dtype, np.inexact) else (-1, 0, 1, 255)
+    b.reshape(-1)[rng.randrange(b.size)] = rng.choice(bad)
     node[key] = b
   elif op == 5:
     node[key] = rng.choice((1, 1.5, "x", b"\x00" * 4, None, [1.0, 2.0], True))
