@@ -280,6 +280,29 @@ def params_costmap(args, command: str):
   return costmap
 
 
+def prepare_out(out, option: str = "--out"):
+  """Creates an output folder and proves it writable before a command does its work.
+
+  Args:
+    out: pathlib.Path of the folder (created with its parents).
+    option: the option that named it, for the message.
+
+  Returns:
+    `out`.
+
+  Raises:
+    CliError: the folder cannot be created or written.
+  """
+  try:
+    out.mkdir(parents=True, exist_ok=True)
+    probe = out / ".jaxfilters_write_test"
+    probe.write_text("ok")
+    probe.unlink()
+  except OSError as e:
+    raise CliError(f"{option} {out}: cannot write there ({e.strerror or e})") from None
+  return out
+
+
 def read_text_file(path: str, option: str, *, max_bytes: int) -> str:
   """The UTF-8 text of a regular file of at most `max_bytes`, or CliError naming `option` and the file.
 

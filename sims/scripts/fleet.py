@@ -209,18 +209,6 @@ def _steps_and_chunks(args, step_s: float) -> tuple[int, int]:
   return total, chunk
 
 
-def _prepare_out(out: Path) -> Path:
-  """Creates the output folder and proves it writable *before* the simulation runs."""
-  try:
-    out.mkdir(parents=True, exist_ok=True)
-    probe = out / ".jaxfilters_write_test"
-    probe.write_text("ok")
-    probe.unlink()
-  except OSError as e:
-    raise CliError(f"--out {out}: cannot write there ({e.strerror or e})") from None
-  return out
-
-
 def _enable_cache() -> None:
   import jax
   root = Path(os.environ.get("XDG_CACHE_HOME", Path.home() / ".cache")) / "jaxfilters" / "xla"
@@ -317,7 +305,7 @@ def run_fleet(args) -> int:
   if args.robots_in_keepout > k:
     raise CliError(f"--robots-in-keepout ({args.robots_in_keepout}) counts robots per world; it must be <= the "
                    f"robots per world ({k})")
-  out = _prepare_out(Path(args.out))
+  out = jcli.prepare_out(Path(args.out))
   scenario = scenario_args.scenario_from_args(args, "fleet")
   escape = args.keepout_escape != "off"
   try:

@@ -210,13 +210,7 @@ def check_out_dir(out: Path, overwrite: bool) -> None:
     if others:
       raise CliError(f"--out {out}: not empty and not an earlier policy folder (it holds {others[0]!r}); "
                      "pass --overwrite to write into it anyway")
-  try:
-    out.mkdir(parents=True, exist_ok=True)
-    probe = out / ".jaxfilters_write_test"
-    probe.write_text("ok")
-    probe.unlink()
-  except OSError as e:
-    raise CliError(f"--out {out}: cannot write there ({e.strerror or e})") from None
+  jcli.prepare_out(out)
 
 
 def _finite(v):
