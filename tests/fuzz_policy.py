@@ -42,7 +42,9 @@ def _meta(hidden, obs, act) -> dict:
           "extra": {"seed": 0, "note": "fuzz seed"}}
 
 
-def _tree(hidden, obs, act, seed: int) -> dict:
+def random_tree(hidden, obs, act, seed: int, *, var_floor: float = 0.1) -> dict:
+  """A valid policy.msgpack tree with random weights (obs_var >= var_floor), shaped as
+  `sims.policy.param_shapes` says; also the CLI tests' policy folders."""
   rng = np.random.default_rng(seed)
   tree: dict = {}
   for path, shape in P.param_shapes(hidden, obs, act).items():
@@ -51,7 +53,7 @@ def _tree(hidden, obs, act, seed: int) -> dict:
     for k in parents:
       node = node.setdefault(k, {})
     value = rng.normal(size=shape).astype(np.float32)
-    node[leaf] = np.abs(value) + 0.1 if leaf == "obs_var" else value
+    node[leaf] = np.abs(value) + var_floor if leaf == "obs_var" else value
   return tree
 
 
@@ -62,7 +64,7 @@ def _pack(tree) -> bytes:
 @functools.cache
 def valid_pairs() -> list[tuple[bytes, bytes]]:
   """(policy.json, policy.msgpack) bytes of each seed policy."""
-  return [(json.dumps(_meta(*a), indent=2).encode(), _pack(_tree(*a, seed=i))) for i, a in enumerate(_ARCHS)]
+  return [(json.dumps(_meta(*a), indent=2).encode(), _pack(random_tree(*a, seed=i))) for i, a in enumerate(_ARCHS)]
 
 
 def json_seeds() -> list[bytes]:
@@ -72,7 +74,7 @@ def json_seeds() -> list[bytes]:
 
 def msgpack_seeds() -> list[bytes]:
   """Weights of the first seed's architecture (the JSON beside them): two draws."""
-  return [valid_pairs()[0][1], _pack(_tree(*_ARCHS[0], seed=7))]
+  return [valid_pairs()[0][1], _pack(random_tree(*_ARCHS[0], seed=7))]
 
 
 _ODD_VALUES = (None, True, False, 0, -1, 1.5, 2 ** 31, 10 ** 30, -(10 ** 400), "", "x" * 300, [], {}, [1, 2],

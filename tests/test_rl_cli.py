@@ -170,15 +170,8 @@ def write_policy(folder: Path, *, hidden=(4,), obs=98, act=2, meta_edit=None, tr
   from flax import serialization
 
   from sims.rl import NavEnvConfig
-  rng = np.random.default_rng(seed)
-  tree: dict = {}
-  for path, shape in P.param_shapes(hidden, obs, act).items():
-    node = tree
-    *parents, leaf = path.split("/")
-    for k in parents:
-      node = node.setdefault(k, {})
-    v = rng.normal(size=shape).astype(np.float32)
-    node[leaf] = np.abs(v) + 0.5 if leaf == "obs_var" else v
+  from tests.fuzz_policy import random_tree
+  tree = random_tree(hidden, obs, act, seed, var_floor=0.5)
   meta = {"format": P.FORMAT, "version": P.VERSION, "hidden_sizes": list(hidden), "activation": "tanh",
           "observation_size": obs, "action_size": act, "env_config": dataclasses.asdict(NavEnvConfig()),
           "robots_per_world": 1, "episode_length": 6, "trainer": "rejax.PPO", "jax": jax.__version__,
