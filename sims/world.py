@@ -252,6 +252,46 @@ def dilate_min(a: np.ndarray) -> np.ndarray:
   return np.min([p[i:i + h, j:j + w] for i in range(3) for j in range(3)], axis=0)
 
 
+def spaced_points(pts: np.ndarray, chosen: np.ndarray, spacing: float = SPAWN_SPACING,
+                  limit: int = MAX_SPAWNS) -> np.ndarray:
+  """Greedy spacing: `chosen` followed by each point of `pts` (in order) at least `spacing` from all kept.
+
+  A point is kept when its squared distance to every kept point is >= spacing ** 2 (float64),
+  until `limit` points are kept. Each kept point strikes out the later candidates closer than
+  `spacing` to it at once (one vectorised pass per kept point, not one per candidate), so the
+  next kept point is the first candidate not struck out: the same points as the greedy loop.
+
+  Args:
+    pts: float64 [N, 2] candidates in the order they are tried.
+    chosen: float64 [K, 2] points already kept (K may be 0).
+    spacing: metres.
+    limit: most points returned.
+
+  Returns:
+    float64 [K + k, 2]: `chosen`, then the k kept candidates in order.
+  """
+  pts = np.asarray(pts, np.float64).reshape(-1, 2)
+  chosen = np.asarray(chosen, np.float64).reshape(-1, 2)
+  s2 = spacing ** 2
+  x, y = np.ascontiguousarray(pts[:, 0]), np.ascontiguousarray(pts[:, 1])
+  alive = np.ones(len(pts), bool)
+  for qx, qy in chosen:
+    alive &= (x - qx) ** 2 + (y - qy) ** 2 >= s2
+  kept = [chosen]
+  count, i = len(chosen), 0
+  while count < limit:
+    rest = np.flatnonzero(alive[i:])
+    if len(rest) == 0:
+      break
+    i += int(rest[0])
+    p = pts[i]
+    kept.append(p[None])
+    count += 1
+    i += 1
+    alive[i:] &= (x[i:] - p[0]) ** 2 + (y[i:] - p[1]) ** 2 >= s2
+  return np.concatenate(kept)
+
+
 def _farthest_points(xy: np.ndarray, k: int, rng: np.random.Generator) -> np.ndarray:
   """Indices of k points of xy [N, 2] spread by farthest-point sampling."""
   chosen = [int(rng.integers(len(xy)))]
@@ -337,12 +377,7 @@ def build_world(scenario: Scenario, config: FleetConfig, *, seed: int = 0) -> Wo
   reachable = np.isfinite(reach[best])
 
   def spaced(pts, chosen):
-    for p in pts[rng.permutation(len(pts))]:
-      if len(chosen) >= MAX_SPAWNS:
-        break
-      if len(chosen) == 0 or np.min(np.sum((chosen - p) ** 2, axis=1)) >= SPAWN_SPACING ** 2:
-        chosen = np.concatenate([chosen, p[None]])
-    return chosen
+    return spaced_points(pts[rng.permutation(len(pts))], chosen)
 
   def pick(cells, chosen):
     r, c = np.nonzero(cells)

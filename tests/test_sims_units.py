@@ -24,7 +24,7 @@ from jaxfilters.speed import speed_limit_at_one
 from sims import local_costmap, metrics as metrics_lib, navigation, planner
 from sims.config import FleetConfig, PlannerConfig, RobotConfig
 from sims.scenario import Scenario, speed_limit_host
-from sims.world import build_world
+from sims.world import build_world, spaced_points
 
 # ----------------------------------------------------------------------------- configs
 
@@ -194,6 +194,32 @@ def _drive(world, nav, pose, cmd, ticks):
     cmds.append(np.asarray(cmd))
     stops.append(bool(stopped))
   return np.stack(poses), np.stack(cmds), np.asarray(stops)
+
+
+def test_spaced_points_is_the_greedy_all_pairs_rule():
+  """Each candidate, in order, is kept iff it is >= spacing from every point kept so far (brute force)."""
+  def brute(pts, chosen, spacing, limit):
+    kept = [tuple(q) for q in chosen]
+    for p in pts:
+      if len(kept) >= limit:
+        break
+      if all((p[0] - q[0]) ** 2 + (p[1] - q[1]) ** 2 >= spacing ** 2 for q in kept):
+        kept.append(tuple(p))
+    return np.asarray(kept, np.float64).reshape(-1, 2)
+
+  rng = np.random.default_rng(0)
+  for t in range(60):
+    spacing = float(rng.choice([0.05, 0.3, 0.8]))
+    pts = rng.uniform(-4.0, 4.0, (int(rng.integers(0, 300)), 2))
+    if t % 2:                        # cell centres on a 5 cm grid: exact ties at the spacing
+      pts = np.round(pts / 0.05) * 0.05 + 0.025
+    chosen = rng.uniform(-4.0, 4.0, (int(rng.integers(0, 3)), 2))
+    limit = int(rng.integers(1, 150))
+    got = spaced_points(pts, chosen, spacing, limit)
+    np.testing.assert_array_equal(got, brute(pts, chosen, spacing, limit))
+    d2 = np.sum((got[:, None] - got[None]) ** 2, axis=-1) + np.eye(len(got)) * 1e9
+    assert len(got) <= max(limit, len(chosen))
+    assert np.all(d2[len(chosen):] >= spacing ** 2 * (1 - 1e-12))
 
 
 def test_world_tables(tiny):
