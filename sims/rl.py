@@ -128,6 +128,11 @@ class NavEnvConfig:
     goal_max_distance: m of navigation-field distance: a new goal is drawn among the stations
       at most this far from the robot (and more than 2 m away in a straight line), so every goal
       is reachable within an episode; 0 draws from every station.
+    keepout_stop: velocity mode: the env stops a robot's linear command when its footprint
+      would touch a keepout zone within one control tick's travel plus 0.1 m (turning stays
+      free; `rl_kernels.keepout_stop`), the costmap check a Nav2 controller applies to its
+      own trajectories; metrics["keepout_stops"] counts the stopped robot-ticks. False: the
+      policy alone keeps out (entries are counted and penalised).
   """
   mode: str = "velocity"
   keepout: str = "terminate"
@@ -142,6 +147,7 @@ class NavEnvConfig:
   approach_penalty: float = 20.0
   time_penalty: float = 0.01
   goal_max_distance: float = 10.0
+  keepout_stop: bool = False
 
   def __post_init__(self):
     if self.mode not in MODES:
@@ -152,8 +158,11 @@ class NavEnvConfig:
     if isinstance(c, bool) or int(c) != c or c < 3 or c % 2 == 0:
       raise ValueError(f"NavEnvConfig.crop_cells must be an odd integer >= 3; got {c!r}")
     object.__setattr__(self, "crop_cells", int(c))
+    if not isinstance(self.keepout_stop, (bool, np.bool_)):
+      raise ValueError(f"NavEnvConfig.keepout_stop must be True or False; got {self.keepout_stop!r}")
+    object.__setattr__(self, "keepout_stop", bool(self.keepout_stop))
     for f in dataclasses.fields(self):
-      if f.name in ("mode", "keepout", "crop_cells"):
+      if f.name in ("mode", "keepout", "crop_cells", "keepout_stop"):
         continue
       v = getattr(self, f.name)
       if isinstance(v, bool) or not isinstance(v, (int, float, np.floating, np.integer)) \
@@ -420,7 +429,7 @@ class NavEnv(mjx_env.MjxEnv):
 
   def _metric_names(self):
     return ("progress", "goals_reached", "keepout_entries", "collisions", "speed_violation_s",
-            "speed_violation_after_clip_s", "clipped", "bad_action")
+            "speed_violation_after_clip_s", "speed_violation_outside_entry_s", "clipped", "keepout_stops", "bad_action")
 
   # ------------------------------------------------------------------ step
 
@@ -474,17 +483,25 @@ class NavEnv(mjx_env.MjxEnv):
     tol = fc.speed_tolerance
 
     def tick(carry, _):
-      data, cmd, speed, in_k, acc = carry
+      data, cmd, speed, in_k, prev_cap, acc = carry
       poses = data.qpos[:, :3]
       speed, res = speed_filter(task.bank.speed, poses, speed, mask_index=kernels.layout_index(task, (k,)))
       cap = planner.limit_to_speed(res.speed_limit, res.percentage, jnp.ones((k,), bool), r.max_speed)
       ramped = cmd + jnp.clip(target - cmd, -step_acc, step_acc)
       clipped = clip_command(ramped, cap, r, fc.limit_angular)
       excess = jnp.sum(jnp.abs(ramped - clipped), axis=1) * dt
+      if cfg.keepout_stop:
+        clipped, stopped = kernels.keepout_stop(task, data.qpos, clipped, dt)
+      else:
+        stopped = jnp.zeros((k,), bool)
       v, w = clipped[:, 0], clipped[:, 1]
 
+      # An entry tick: the filter published a lower limit than at the last tick, or (below) the
+      # robot crosses into a slower zone during this tick, before the filter can see it.
+      entry = cap < prev_cap
+
       def substep(c, _):
-        data, in_k, entries, collide, over, late_s = c
+        data, in_k, entries, collide, over, late_s, crossed, outside = c
         th = data.qpos[:, 2]
         ctrl = jnp.stack([v * jnp.cos(th), v * jnp.sin(th), w], axis=1)
         data = jax.vmap(lambda d, u: mjx_step(model, d, u))(data, ctrl)
@@ -493,25 +510,32 @@ class NavEnv(mjx_env.MjxEnv):
         hit = kernels.grid_value(task.static_inflated, p.map_origin, p.map_resolution, xy,
                           constants.NO_INFORMATION) >= constants.INSCRIBED_INFLATED_OBSTACLE
         spd = jnp.linalg.norm(data.qvel[:, :2], axis=-1)
-        over_limit = spd > kernels.mps_cap(task, xy, r.max_speed) + tol
+        pos_cap = kernels.mps_cap(task, xy, r.max_speed)
+        over_limit = spd > pos_cap + tol
         # Above the limit this tick's filter already published: the clip did not hold it.
         late = spd > cap + tol
+        crossed = crossed | (pos_cap < cap)
+        out = over_limit & ~crossed
         return (data, kin, entries + (kin & ~in_k), collide | hit,
-                over + over_limit.astype(_F32) * fc.physics_dt, late_s + late.astype(_F32) * fc.physics_dt), None
+                over + over_limit.astype(_F32) * fc.physics_dt, late_s + late.astype(_F32) * fc.physics_dt,
+                crossed, outside + out.astype(_F32) * fc.physics_dt), None
 
       zeros_b = jnp.zeros((k,), bool)
       zeros_f = jnp.zeros((k,), _F32)
-      (data, in_k, entries, collide, over, late), _ = jax.lax.scan(
-          substep, (data, in_k, zeros_b.astype(jnp.int32), zeros_b, zeros_f, zeros_f), None,
+      (data, in_k, entries, collide, over, late, _, outside), _ = jax.lax.scan(
+          substep, (data, in_k, zeros_b.astype(jnp.int32), zeros_b, zeros_f, zeros_f, entry, zeros_f), None,
           length=fc.substeps_per_tick)
       acc = jax.tree.map(jnp.add, acc, {"entries": entries, "collide": collide.astype(jnp.int32),
-                                        "over": over, "late": late, "excess": excess})
-      return (data, clipped, speed, in_k, acc), cap
+                                        "over": over, "late": late, "outside": outside, "excess": excess,
+                                        "stops": stopped.astype(jnp.int32)})
+      return (data, clipped, speed, in_k, cap, acc), cap
 
     acc0 = {"entries": jnp.zeros((k,), jnp.int32), "collide": jnp.zeros((k,), jnp.int32),
-            "over": jnp.zeros((k,), _F32), "late": jnp.zeros((k,), _F32), "excess": jnp.zeros((k,), _F32)}
-    (data, cmd, speed, in_k, acc), caps = jax.lax.scan(tick, (data, cmd, speed, in_k, acc0), None,
-                                                       length=fc.ticks_per_step)
+            "over": jnp.zeros((k,), _F32), "late": jnp.zeros((k,), _F32), "outside": jnp.zeros((k,), _F32),
+            "excess": jnp.zeros((k,), _F32), "stops": jnp.zeros((k,), jnp.int32)}
+    prev_cap = jnp.where(swapped, jnp.inf, info["cap"])
+    (data, cmd, speed, in_k, _, acc), caps = jax.lax.scan(tick, (data, cmd, speed, in_k, prev_cap, acc0), None,
+                                                          length=fc.ticks_per_step)
     xy = data.qpos[:, :2]
     dist1 = jax.vmap(lambda g, q: navigation.nav_value(nav, g, q))(goal, xy)
     reach = 2.0 * r.max_speed * fc.step_seconds
@@ -541,6 +565,8 @@ class NavEnv(mjx_env.MjxEnv):
                "keepout_entries": jnp.sum(acc["entries"]).astype(_F32),
                "collisions": jnp.sum(collided).astype(_F32), "speed_violation_s": jnp.sum(acc["over"]),
                "speed_violation_after_clip_s": jnp.sum(acc["late"]),
+               "speed_violation_outside_entry_s": jnp.sum(acc["outside"]),
+               "keepout_stops": jnp.sum(acc["stops"]).astype(_F32),
                "clipped": jnp.sum(acc["excess"]), "bad_action": jnp.sum(bad).astype(_F32)})
     obs = self._obs(task, data, info)
     return state.replace(data=data, obs=obs, reward=reward.astype(_F32), done=done.astype(_F32),

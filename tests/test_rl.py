@@ -119,6 +119,33 @@ def test_speed_zone_clips_command_to_the_filter_limit(venv):
   assert float(s.obs[81]) == pytest.approx(cap / 0.5) and float(s.obs[82]) == 1.0   # limit in force
 
 
+def test_speed_excess_outside_entry_counts_only_what_the_clip_did_not_hold(venv):
+  env, reset, step = venv
+  sc = env.fleet.world.scenario
+  sp = sc.speed.data
+  res = sc.speed.resolution
+  rows, cols = np.nonzero(sp == 50)
+  r, c = int(np.median(rows)), int(cols.min())
+  assert np.all(sp[r, c - 30:c] == 0) and np.all(_static_inflated(env)[r, c - 30:c + 20] < 253)
+  # Full speed from 1.5 m before the 50 % zone into it: above the limit only around the entry.
+  s = _place(reset(jax.random.PRNGKey(2)), _cell_xy(sc.speed.origin, res, r, c - 30), 0.0)
+  over = outside = 0.0
+  for _ in range(25):
+    s = step(s, jnp.asarray([1.0, 0.0]))
+    over += float(s.metrics["speed_violation_s"])
+    outside += float(s.metrics["speed_violation_outside_entry_s"])
+  assert sp[r, int((float(s.data.qpos[0, 0]) - float(sc.speed.origin[0])) / res)] == 50     # inside now
+  assert over > 0.0 and outside == 0.0
+  # Inside the zone at 0.5 m/s with the zone's limit already published (no entry this tick): the
+  # robot slowing down after the clip is above the limit outside an entry tick.
+  s = _place(reset(jax.random.PRNGKey(2)), _cell_xy(sc.speed.origin, res, r, c + 10), 0.0)
+  s = s.replace(data=s.data.replace(qvel=s.data.qvel.at[0, 0].set(0.5)),
+                info=dict(s.info, cap=jnp.full_like(s.info["cap"], 0.25), cmd=s.info["cmd"].at[0, 0].set(0.5)))
+  s = step(s, jnp.asarray([1.0, 0.0]))
+  assert float(s.metrics["speed_violation_outside_entry_s"]) > 0.0
+  assert float(s.metrics["speed_violation_outside_entry_s"]) <= float(s.metrics["speed_violation_s"])
+
+
 def _keepout_approach(env):
   """(start xy, zone first column x) for driving +x into a lethal keepout zone over clear ground."""
   sc = env.fleet.world.scenario
@@ -156,6 +183,29 @@ def test_keepout_entry_ends_or_costs(mode, venv):
   assert entered_at is not None and prev_x < edge_x <= x    # reported on the step that crossed the edge
   assert float(s.done) == (1.0 if mode == "terminate" else 0.0)
   assert float(s.reward) < -9.0                        # the 10.0 penalty dominates the step
+
+
+def test_keepout_stop_holds_a_robot_driving_at_a_zone(venv):
+  env, _, _ = venv
+  env = NavEnv(env.fleet, NavEnvConfig(keepout_stop=True))
+  reset, step = jax.jit(env.reset), jax.jit(env.step)
+  start, edge_x, _ = _keepout_approach(env)
+  s = _place(reset(jax.random.PRNGKey(3)), start, 0.0)
+  stops = 0.0
+  for _ in range(40):                                   # 8 s at full speed from 1 m before the zone
+    s = step(s, jnp.asarray([1.0, 0.0]))
+    assert float(s.metrics["keepout_entries"]) == 0.0 and float(s.done) == 0.0
+    stops += float(s.metrics["keepout_stops"])
+  x = float(s.data.qpos[0, 0])
+  assert stops > 0 and x < edge_x and edge_x - x < 0.6  # held near the zone, not short of it
+  assert float(jnp.linalg.norm(s.data.qvel[0, :2])) < 0.02
+  yaw0 = float(s.data.qpos[0, 2])
+  s = step(s, jnp.asarray([0.0, 1.0]))                  # turning stays free
+  assert abs(float(s.data.qpos[0, 2]) - yaw0) > 0.05
+  s = _place(s, (x, float(s.data.qpos[0, 1])), 0.0)
+  for _ in range(3):
+    s = step(s, jnp.asarray([-1.0, 0.0]))               # and so does backing away
+  assert float(s.data.qpos[0, 0]) < x - 0.05 and float(s.metrics["keepout_stops"]) == 0.0
 
 
 def test_wall_collision_ends_episode(venv):

@@ -72,9 +72,10 @@ Maps, one of three sets (a mix is refused):
 
 JSON keys: episodes, success (fraction of episodes that reached a goal), goals_per_episode,
 keepout_entries and collisions (totals over all episodes), speed_excess_s (mean seconds per
-episode above the limit in force), speed_excess_after_clip_s (total seconds above a limit the
-speed filter had already published at the last 20 Hz tick: 0 when every excess falls in the tick
-a zone is entered), mean_return, clipped_per_episode (m of command the speed filter clipped),
+episode above the limit in force), speed_excess_after_clip_s (total seconds above the limit the
+speed filter published at the current 20 Hz tick: the robot slowing down after the clip),
+speed_excess_outside_entry_s (total seconds above the limit in force outside the 20 Hz ticks in
+which a slower zone is entered: 0 when the clip holds from the tick after each entry), mean_return, clipped_per_episode (m of command the speed filter clipped),
 steps_per_episode, policy, seed, map, params, randomize, episode_length, device, wall_s.
 
 exit codes: 0 ok (rule breaks are reported, not an exit code), 1 internal error (a bug;
@@ -112,6 +113,10 @@ def register_rl(sub) -> argparse.ArgumentParser:
   t.add_argument("--episode-length", type=int, default=300, help="env steps of 0.2 s per episode (default 300)")
   t.add_argument("--keepout", choices=("terminate", "penalty"), default="terminate",
                  help="a keepout entry ends the episode (terminate) or only costs reward (default terminate)")
+  t.add_argument("--keepout-stop", action="store_true",
+                 help="the env stops a robot's linear command when its footprint would touch a keepout zone "
+                      "within the next control tick's travel plus 0.1 m (turning stays free); recorded in the "
+                      "policy, so rl eval applies it too")
   t.add_argument("--randomize", action="store_true",
                  help="draw a zone layout (keepout and speed rectangles at random places, sizes and limits), "
                  "a scale of the limits and the goals per episode, from --layouts layouts seeded by --seed")
@@ -257,7 +262,7 @@ def run_train(args) -> int:
 
   from sims import sharding
   from sims.policy import save_policy
-  from sims.ppo import EVAL_KEYS, GymnaxAdapter, make_ppo, plot_curve, train_with_curve
+  from sims.ppo import EVAL_KEYS, GymnaxAdapter, make_ppo, plot_curve, replicas_identical, train_with_curve
   from sims.randomization import training_env
   from sims.rl import NavEnvConfig
 
@@ -269,8 +274,12 @@ def run_train(args) -> int:
     except ValueError as e:
       raise CliError(f"--devices: {e} (the envs are --num-envs)") from None
   n_dev = 1 if mesh is None else int(mesh.devices.size)
+  if (args.num_envs // n_dev * args.num_steps) % args.minibatches:
+    raise CliError(f"--minibatches ({args.minibatches}) must divide each device's batch, --num-envs / "
+                   f"--devices x --num-steps ({args.num_envs // n_dev} x {args.num_steps}): each device "
+                   "splits its own share into minibatches")
   env, fn = training_env(None, randomize=args.randomize, seed=args.seed, layouts=args.layouts,
-                         config=NavEnvConfig(keepout=args.keepout))
+                         config=NavEnvConfig(keepout=args.keepout, keepout_stop=args.keepout_stop))
   adapter = GymnaxAdapter(env, args.episode_length, fn, full_reset=args.randomize)
   per_iter = args.num_envs * args.num_steps
   iters = max(1, -(-args.timesteps // per_iter))
@@ -294,6 +303,12 @@ def run_train(args) -> int:
   per_env = getattr(ts.last_obs.sharding, "spec", None)     # the env batch's sharding after training
   placement = {"env_batch": None if per_env is None else [None if a is None else str(a) for a in per_env],
                "envs_per_device": int(ts.last_obs.addressable_shards[0].data.shape[0])}
+  if mesh is not None:
+    # Data-parallel PPO keeps the networks identical on every device; a difference is a bug.
+    placement["replicas_identical"] = replicas_identical(ts)
+    if not placement["replicas_identical"]:
+      raise RuntimeError("rl train --devices: the devices' copies of the policy differ after training "
+                         "(data-parallel updates must keep them identical); nothing was saved")
   config = {k: (str(v) if isinstance(v, Path) else v) for k, v in vars(args).items() if k != "func"}
   config.update(hidden=list(hidden), env_config=_finite(dataclasses.asdict(env.nav_config)),
                 robots_per_world=env.num_robots, env_steps=steps, calls=num_calls, iterations_per_call=per_call)
@@ -302,7 +317,7 @@ def run_train(args) -> int:
               extra=_finite({"seed": args.seed, "randomize": args.randomize, "env_steps": steps,
                              "final": final}))
   wall = time.perf_counter() - t_start
-  compile_s = timing["compile_train_s"] + timing["compile_eval_s"]
+  compile_s = timing.pop("compile_s")
   result = {"trainer": "rejax.PPO", "jax": jax.__version__,
             "device": {"kind": dev.device_kind, "platform": dev.platform, "count": n_dev, **placement},
             "timing": {"compile_s": compile_s, **timing, "wall_s": wall,
@@ -326,8 +341,9 @@ def run_train(args) -> int:
 # evaluate_policy's per-episode metrics other than the headline ones, by their output name (a metric
 # not named here is reported as NAME_per_episode).
 _HEADLINE = ("success", "goals_reached", "keepout_entries", "collisions", "speed_violation_s",
-             "speed_violation_after_clip_s")
-_OTHER_METRICS = {"return": "mean_return", "clipped": "clipped_per_episode", "length": "steps_per_episode"}
+             "speed_violation_after_clip_s", "speed_violation_outside_entry_s")
+_OTHER_METRICS = {"return": "mean_return", "clipped": "clipped_per_episode", "length": "steps_per_episode",
+                  "keepout_stops": "keepout_stops_per_episode"}
 
 
 def run_eval(args) -> int:
@@ -377,9 +393,12 @@ def run_eval(args) -> int:
       "keepout_entries": int(round(m["keepout_entries"].sum())),
       "collisions": int(round(m["collisions"].sum())),
       "speed_excess_s": float(m["speed_violation_s"].mean()),
-      # Above the limit the speed filter had already published at the last controller tick: the
-      # clip held from the tick after a zone was entered; 0 means every excess is an entry tick's.
+      # Above the limit the speed filter published at the current controller tick (the robot still
+      # slowing down after the clip).
       "speed_excess_after_clip_s": float(m["speed_violation_after_clip_s"].sum()),
+      # Above the limit in force outside the ticks where a slower zone is entered: 0 when the clip
+      # holds from the tick after every entry.
+      "speed_excess_outside_entry_s": float(m["speed_violation_outside_entry_s"].sum()),
       **{_OTHER_METRICS.get(key, f"{key}_per_episode"): float(v.mean()) for key, v in m.items()
          if key not in _HEADLINE},
       "policy": str(args.policy), "seed": args.seed, "map": scenario_args.map_label(args),
