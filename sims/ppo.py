@@ -59,7 +59,7 @@ _F32 = jnp.float32
 
 EVAL_KEYS = ("return", "success", "goals_reached", "keepout_entries", "collisions",
              "speed_violation_s", "speed_violation_after_clip_s", "speed_violation_outside_entry_s", "clipped",
-             "keepout_stops", "length")
+             "costmap_stops", "length")
 
 
 def evaluate_policy(adapter: GymnaxAdapter, act: Callable, key: jax.Array, num_eval: int) -> dict:
@@ -82,7 +82,7 @@ def evaluate_policy(adapter: GymnaxAdapter, act: Callable, key: jax.Array, num_e
              "collisions": m["collisions"], "speed_violation_s": m["speed_violation_s"],
              "speed_violation_after_clip_s": m["speed_violation_after_clip_s"],
              "speed_violation_outside_entry_s": m["speed_violation_outside_entry_s"],
-             "keepout_stops": m["keepout_stops"],
+             "costmap_stops": m["costmap_stops"],
              "clipped": m["clipped"], "length": jnp.ones((), _F32)}
       acc = {n: acc[n] + jnp.where(alive, add[n], 0.0) for n in acc}
       return (nst, alive & (nst.done == 0), acc), None

@@ -128,11 +128,12 @@ class NavEnvConfig:
     goal_max_distance: m of navigation-field distance: a new goal is drawn among the stations
       at most this far from the robot (and more than 2 m away in a straight line), so every goal
       is reachable within an episode; 0 draws from every station.
-    keepout_stop: velocity mode: the env stops a robot's linear command when its footprint
-      would touch a keepout zone within one control tick's travel plus 0.1 m (turning stays
-      free; `rl_kernels.keepout_stop`), the costmap check a Nav2 controller applies to its
-      own trajectories; metrics["keepout_stops"] counts the stopped robot-ticks. False: the
-      policy alone keeps out (entries are counted and penalised).
+    costmap_stop: velocity mode: the env stops a robot's linear command when its footprint
+      would touch a keepout zone or a static obstacle within one control tick's travel plus
+      0.1 m (turning stays free; `rl_kernels.costmap_stop`), the costmap check a Nav2
+      controller applies to its own trajectories; metrics["costmap_stops"] counts the stopped
+      robot-ticks. False: the policy alone keeps out (entries and collisions are counted and
+      penalised).
   """
   mode: str = "velocity"
   keepout: str = "terminate"
@@ -147,7 +148,7 @@ class NavEnvConfig:
   approach_penalty: float = 20.0
   time_penalty: float = 0.01
   goal_max_distance: float = 10.0
-  keepout_stop: bool = False
+  costmap_stop: bool = False
 
   def __post_init__(self):
     if self.mode not in MODES:
@@ -158,11 +159,11 @@ class NavEnvConfig:
     if isinstance(c, bool) or int(c) != c or c < 3 or c % 2 == 0:
       raise ValueError(f"NavEnvConfig.crop_cells must be an odd integer >= 3; got {c!r}")
     object.__setattr__(self, "crop_cells", int(c))
-    if not isinstance(self.keepout_stop, (bool, np.bool_)):
-      raise ValueError(f"NavEnvConfig.keepout_stop must be True or False; got {self.keepout_stop!r}")
-    object.__setattr__(self, "keepout_stop", bool(self.keepout_stop))
+    if not isinstance(self.costmap_stop, (bool, np.bool_)):
+      raise ValueError(f"NavEnvConfig.costmap_stop must be True or False; got {self.costmap_stop!r}")
+    object.__setattr__(self, "costmap_stop", bool(self.costmap_stop))
     for f in dataclasses.fields(self):
-      if f.name in ("mode", "keepout", "crop_cells", "keepout_stop"):
+      if f.name in ("mode", "keepout", "crop_cells", "costmap_stop"):
         continue
       v = getattr(self, f.name)
       if isinstance(v, bool) or not isinstance(v, (int, float, np.floating, np.integer)) \
@@ -429,7 +430,7 @@ class NavEnv(mjx_env.MjxEnv):
 
   def _metric_names(self):
     return ("progress", "goals_reached", "keepout_entries", "collisions", "speed_violation_s",
-            "speed_violation_after_clip_s", "speed_violation_outside_entry_s", "clipped", "keepout_stops", "bad_action")
+            "speed_violation_after_clip_s", "speed_violation_outside_entry_s", "clipped", "costmap_stops", "bad_action")
 
   # ------------------------------------------------------------------ step
 
@@ -490,8 +491,8 @@ class NavEnv(mjx_env.MjxEnv):
       ramped = cmd + jnp.clip(target - cmd, -step_acc, step_acc)
       clipped = clip_command(ramped, cap, r, fc.limit_angular)
       excess = jnp.sum(jnp.abs(ramped - clipped), axis=1) * dt
-      if cfg.keepout_stop:
-        clipped, stopped = kernels.keepout_stop(task, data.qpos, clipped, dt)
+      if cfg.costmap_stop:
+        clipped, stopped = kernels.costmap_stop(task, data.qpos, clipped, dt)
       else:
         stopped = jnp.zeros((k,), bool)
       v, w = clipped[:, 0], clipped[:, 1]
@@ -566,7 +567,7 @@ class NavEnv(mjx_env.MjxEnv):
                "collisions": jnp.sum(collided).astype(_F32), "speed_violation_s": jnp.sum(acc["over"]),
                "speed_violation_after_clip_s": jnp.sum(acc["late"]),
                "speed_violation_outside_entry_s": jnp.sum(acc["outside"]),
-               "keepout_stops": jnp.sum(acc["stops"]).astype(_F32),
+               "costmap_stops": jnp.sum(acc["stops"]).astype(_F32),
                "clipped": jnp.sum(acc["excess"]), "bad_action": jnp.sum(bad).astype(_F32)})
     obs = self._obs(task, data, info)
     return state.replace(data=data, obs=obs, reward=reward.astype(_F32), done=done.astype(_F32),

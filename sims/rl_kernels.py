@@ -66,22 +66,23 @@ def keepout_cost(task: NavTask, xy: jax.Array) -> jax.Array:
   return keepout_cost_at(task.bank.keepout, xy, mask_index=layout_index(task, xy.shape[:-1]))
 
 
-KEEPOUT_STOP_MARGIN = 0.1   # m beyond one tick's travel: the robot's slowing down after a stop command
-KEEPOUT_STOP_SAMPLES = 4    # footprint checks along the look-ahead (<= 3.2 cm apart at 0.5 m/s, 20 Hz)
+COSTMAP_STOP_MARGIN = 0.1   # m beyond one tick's travel: the robot's slowing down after a stop command
+COSTMAP_STOP_SAMPLES = 4    # footprint checks along the look-ahead (<= 3.2 cm apart at 0.5 m/s, 20 Hz)
 
 
-def keepout_stop(task: NavTask, qpos: jax.Array, cmd: jax.Array, dt: float) -> tuple[jax.Array, jax.Array]:
-  """Stops the linear command of robots whose footprint would touch a keepout zone within the look-ahead.
+def costmap_stop(task: NavTask, qpos: jax.Array, cmd: jax.Array, dt: float) -> tuple[jax.Array, jax.Array]:
+  """Stops the linear command of robots whose footprint would touch a keepout zone or a static obstacle.
 
   The look-ahead runs along the direction of motion (backwards when reversing) for
-  |v| x dt (one control tick at the command) plus KEEPOUT_STOP_MARGIN; a point where
-  the keepout filter's footprint cost is >= INSCRIBED_INFLATED_OBSTACLE (the robot's
-  disc there touches a lethal cell) blocks it. Turning is never blocked. This is the
-  costmap check a Nav2 controller applies to its own trajectories, applied to the
+  |v| x dt (one control tick at the command) plus COSTMAP_STOP_MARGIN; a point where
+  the keepout filter's cost or the inflated static layer's cost is >=
+  INSCRIBED_INFLATED_OBSTACLE (the robot's disc there touches a lethal cell) blocks
+  it. Turning is never blocked. This is the costmap check a Nav2 controller applies
+  to its own trajectories (static layer, inflation, keepout filter), applied to the
   policy's command.
 
   Args:
-    task: NavTask (the env's keepout mask and layout).
+    task: NavTask (the env's keepout mask, layout and inflated static layer).
     qpos: float32 [K, 3+] robot poses (x, y, yaw first).
     cmd: float32 [K, 2] commands (v, w) after the speed filter's clip.
     dt: s, control period.
@@ -93,10 +94,13 @@ def keepout_stop(task: NavTask, qpos: jax.Array, cmd: jax.Array, dt: float) -> t
   th = qpos[:, 2]
   sign = jnp.where(v < 0, -1.0, 1.0)
   direction = sign[:, None] * jnp.stack([jnp.cos(th), jnp.sin(th)], axis=1)
-  reach = jnp.abs(v) * dt + KEEPOUT_STOP_MARGIN
-  frac = jnp.arange(1, KEEPOUT_STOP_SAMPLES + 1, dtype=jnp.float32) / KEEPOUT_STOP_SAMPLES
+  reach = jnp.abs(v) * dt + COSTMAP_STOP_MARGIN
+  frac = jnp.arange(1, COSTMAP_STOP_SAMPLES + 1, dtype=jnp.float32) / COSTMAP_STOP_SAMPLES
   pts = qpos[:, None, :2] + (reach[:, None] * frac[None, :])[..., None] * direction[:, None, :]
-  touches = keepout_cost(task, pts) >= constants.INSCRIBED_INFLATED_OBSTACLE
+  p = task.world
+  lethal = constants.INSCRIBED_INFLATED_OBSTACLE
+  touches = (keepout_cost(task, pts) >= lethal) | (
+      grid_value(task.static_inflated, p.map_origin, p.map_resolution, pts, constants.NO_INFORMATION) >= lethal)
   blocked = jnp.any(touches, axis=1) & (v != 0)
   return cmd.at[:, 0].set(jnp.where(blocked, 0.0, v)), blocked
 

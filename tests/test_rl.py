@@ -185,9 +185,9 @@ def test_keepout_entry_ends_or_costs(mode, venv):
   assert float(s.reward) < -9.0                        # the 10.0 penalty dominates the step
 
 
-def test_keepout_stop_holds_a_robot_driving_at_a_zone(venv):
+def test_costmap_stop_holds_a_robot_driving_at_a_zone(venv):
   env, _, _ = venv
-  env = NavEnv(env.fleet, NavEnvConfig(keepout_stop=True))
+  env = NavEnv(env.fleet, NavEnvConfig(costmap_stop=True))
   reset, step = jax.jit(env.reset), jax.jit(env.step)
   start, edge_x, _ = _keepout_approach(env)
   s = _place(reset(jax.random.PRNGKey(3)), start, 0.0)
@@ -195,7 +195,7 @@ def test_keepout_stop_holds_a_robot_driving_at_a_zone(venv):
   for _ in range(40):                                   # 8 s at full speed from 1 m before the zone
     s = step(s, jnp.asarray([1.0, 0.0]))
     assert float(s.metrics["keepout_entries"]) == 0.0 and float(s.done) == 0.0
-    stops += float(s.metrics["keepout_stops"])
+    stops += float(s.metrics["costmap_stops"])
   x = float(s.data.qpos[0, 0])
   assert stops > 0 and x < edge_x and edge_x - x < 0.6  # held near the zone, not short of it
   assert float(jnp.linalg.norm(s.data.qvel[0, :2])) < 0.02
@@ -205,11 +205,15 @@ def test_keepout_stop_holds_a_robot_driving_at_a_zone(venv):
   s = _place(s, (x, float(s.data.qpos[0, 1])), 0.0)
   for _ in range(3):
     s = step(s, jnp.asarray([-1.0, 0.0]))               # and so does backing away
-  assert float(s.data.qpos[0, 0]) < x - 0.05 and float(s.metrics["keepout_stops"]) == 0.0
+  assert float(s.data.qpos[0, 0]) < x - 0.05 and float(s.metrics["costmap_stops"]) == 0.0
 
 
-def test_wall_collision_ends_episode(venv):
+@pytest.mark.parametrize("costmap_stop", [False, True])
+def test_wall_collision_ends_episode(costmap_stop, venv):
   env, reset, step = venv
+  if costmap_stop:
+    env = NavEnv(env.fleet, NavEnvConfig(costmap_stop=True))
+    reset, step = jax.jit(env.reset), jax.jit(env.step)
   sc = env.fleet.world.scenario
   stat = _static_inflated(env)
   keep = sc.keepout.data
@@ -226,6 +230,15 @@ def test_wall_collision_ends_episode(venv):
       if np.any(stat[r - 2:r + 3, c:c + j] >= 253) or np.any(keep[r - 5:r + 6, c:c + j + 5] != 0):
         continue
       s = _place(reset(jax.random.PRNGKey(4)), _cell_xy(sc.map.origin, res, r, c), 0.0)
+      x_wall = float(sc.map.origin[0]) + (c + j) * res
+      if costmap_stop:                      # held short of the wall: no collision, the episode goes on
+        stops = 0.0
+        for _ in range(25):
+          s = step(s, jnp.asarray([1.0, 0.0]))
+          assert float(s.done) == 0.0 and float(s.metrics["collisions"]) == 0.0
+          stops += float(s.metrics["costmap_stops"])
+        assert stops > 0 and x_wall - 0.6 < float(s.data.qpos[0, 0]) < x_wall
+        return
       for _ in range(25):
         s = step(s, jnp.asarray([1.0, 0.0]))
         if float(s.done):
@@ -233,7 +246,6 @@ def test_wall_collision_ends_episode(venv):
       assert float(s.done) == 1.0 and float(s.metrics["collisions"]) == 1.0
       assert float(s.metrics["keepout_entries"]) == 0.0 and float(s.reward) < -9.0
       # The episode ended at the inscribed boundary, not before it.
-      x_wall = float(sc.map.origin[0]) + (c + j) * res
       assert float(s.data.qpos[0, 0]) >= x_wall - 0.5 * 0.2
       return
   raise AssertionError("no wall approach found")

@@ -113,10 +113,11 @@ def register_rl(sub) -> argparse.ArgumentParser:
   t.add_argument("--episode-length", type=int, default=300, help="env steps of 0.2 s per episode (default 300)")
   t.add_argument("--keepout", choices=("terminate", "penalty"), default="terminate",
                  help="a keepout entry ends the episode (terminate) or only costs reward (default terminate)")
-  t.add_argument("--keepout-stop", action="store_true",
+  t.add_argument("--costmap-stop", action="store_true",
                  help="the env stops a robot's linear command when its footprint would touch a keepout zone "
-                      "within the next control tick's travel plus 0.1 m (turning stays free); recorded in the "
-                      "policy, so rl eval applies it too")
+                      "or a static obstacle within the next control tick's travel plus 0.1 m (turning stays "
+                      "free), as a Nav2 controller checks its trajectories against the costmap; recorded in "
+                      "the policy, so rl eval applies it too")
   t.add_argument("--randomize", action="store_true",
                  help="draw a zone layout (keepout and speed rectangles at random places, sizes and limits), "
                  "a scale of the limits and the goals per episode, from --layouts layouts seeded by --seed")
@@ -279,7 +280,7 @@ def run_train(args) -> int:
                    f"--devices x --num-steps ({args.num_envs // n_dev} x {args.num_steps}): each device "
                    "splits its own share into minibatches")
   env, fn = training_env(None, randomize=args.randomize, seed=args.seed, layouts=args.layouts,
-                         config=NavEnvConfig(keepout=args.keepout, keepout_stop=args.keepout_stop))
+                         config=NavEnvConfig(keepout=args.keepout, costmap_stop=args.costmap_stop))
   adapter = GymnaxAdapter(env, args.episode_length, fn, full_reset=args.randomize)
   per_iter = args.num_envs * args.num_steps
   iters = max(1, -(-args.timesteps // per_iter))
@@ -343,7 +344,7 @@ def run_train(args) -> int:
 _HEADLINE = ("success", "goals_reached", "keepout_entries", "collisions", "speed_violation_s",
              "speed_violation_after_clip_s", "speed_violation_outside_entry_s")
 _OTHER_METRICS = {"return": "mean_return", "clipped": "clipped_per_episode", "length": "steps_per_episode",
-                  "keepout_stops": "keepout_stops_per_episode"}
+                  "costmap_stops": "costmap_stops_per_episode"}
 
 
 def run_eval(args) -> int:
