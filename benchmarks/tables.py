@@ -175,11 +175,15 @@ def rl_train_rows(run: dict, seen: set) -> list[list[str]]:
     base.append(f"1 device, same call: {rate(one, 'env-steps/s')} (x{num(t['env_steps_per_s'] / one)})")
   if ev:
     base.append(f"eval {ev['episodes']:,} episodes, new layouts: {num(100 * ev['success'])} % success, "
-                f"{ev['keepout_entries']} keepout entries, {ev['collisions']} collisions")
-  label = ("PPO to a policy (`jaxfilters rl train --randomize`)" if f["devices"] == 1 else
+                f"{ev['keepout_entries']} keepout entries, {ev['collisions']} collisions"
+                + (f", {num(ev['speed_excess_outside_entry_s'])} s above a limit outside entry ticks"
+                   if "speed_excess_outside_entry_s" in ev else ""))
+  label = (f"PPO to a policy (`jaxfilters rl train --randomize{f.get('flags', '')}`)" if f["devices"] == 1 else
            f"PPO over {f['devices']} GPUs, env batch sharded (`rl train --devices {f['devices']}`)")
   rows = [[label, f"{f['envs']:,} envs x {f['rollout_steps']} steps, {num(f['env_steps'] / 1e6)} M env steps",
-           seconds(t["compile_s"], 0), f"{num(t['train_s'])} s train, {num(t['wall_s'])} s wall",
+           seconds(t["compile_s"], 0),
+           f"{num(t['train_s'])} s train, {num(t['wall_s'])} s wall"
+           + (f", {num(t['process_s'])} s interpreter start to exit" if "process_s" in t else ""),
            f"**{rate(t['env_steps_per_s'], 'env-steps/s')}**", "; ".join(base), "", run["id"]]]
   return rows
 

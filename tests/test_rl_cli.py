@@ -216,6 +216,8 @@ BAD = [
     (TRAIN + " --devices many --out {tmp}/o", "--devices must be a positive integer or 'all'"),
     (TRAIN + " --hidden 16,x --out {tmp}/o", "--hidden must be comma-separated integers"),
     (TRAIN + " --minibatches 5 --out {tmp}/o", "--minibatches (5) must divide"),
+    (TRAIN + " --num-steps 2 --minibatches 8 --devices 4 --out {tmp}/o",
+     "--minibatches (8) must divide each device's batch, --num-envs / --devices x --num-steps (1 x 2)"),
     (TRAIN + " --out {full}", "not empty and not an earlier policy folder"),
     (TRAIN + " --seed x --out {tmp}/o", "argument --seed: invalid int value"),
     ("rl eval --policy {ok} --seed -1", "--seed must lie in [0, 2**32)"),

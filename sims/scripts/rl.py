@@ -201,6 +201,13 @@ def parse_devices(text, num_envs: int):
   return n
 
 
+def _check_device_minibatches(args, n_dev: int) -> None:
+  if (args.num_envs // n_dev * args.num_steps) % args.minibatches:
+    raise CliError(f"--minibatches ({args.minibatches}) must divide each device's batch, --num-envs / "
+                   f"--devices x --num-steps ({args.num_envs // n_dev} x {args.num_steps}): each device "
+                   "splits its own share into minibatches")
+
+
 def check_out_dir(out: Path, overwrite: bool) -> None:
   """--out is missing, empty, an earlier run's folder (only POLICY_OUTPUTS) or --overwrite; else CliError.
 
@@ -256,6 +263,8 @@ def run_train(args) -> int:
     raise CliError(f"--minibatches ({args.minibatches}) must divide --num-envs x --num-steps "
                    f"({args.num_envs * args.num_steps})")
   devices = parse_devices(args.devices, args.num_envs)
+  if isinstance(devices, int):
+    _check_device_minibatches(args, devices)
   out = Path(args.out)
   check_out_dir(out, args.overwrite)
 
@@ -275,10 +284,7 @@ def run_train(args) -> int:
     except ValueError as e:
       raise CliError(f"--devices: {e} (the envs are --num-envs)") from None
   n_dev = 1 if mesh is None else int(mesh.devices.size)
-  if (args.num_envs // n_dev * args.num_steps) % args.minibatches:
-    raise CliError(f"--minibatches ({args.minibatches}) must divide each device's batch, --num-envs / "
-                   f"--devices x --num-steps ({args.num_envs // n_dev} x {args.num_steps}): each device "
-                   "splits its own share into minibatches")
+  _check_device_minibatches(args, n_dev)
   env, fn = training_env(None, randomize=args.randomize, seed=args.seed, layouts=args.layouts,
                          config=NavEnvConfig(keepout=args.keepout, costmap_stop=args.costmap_stop))
   adapter = GymnaxAdapter(env, args.episode_length, fn, full_reset=args.randomize)
