@@ -82,8 +82,8 @@ included; `reset` returns empty infos. `NavGymEnv.step` returns
 `info["metrics"]` as Python floats.
 
 Input checks (host-side, before the device sees the action): an action of
-another shape, a non-floating dtype, a NaN or infinity, or a value outside
-[-1, 1] raises `ValueError` naming the problem and what is expected (the env's
+another shape, a non-floating dtype, a NaN or infinity, a value outside
+[-1, 1], or a nonzero value float32 would make subnormal or 0 raises `ValueError` naming the problem and what is expected (the env's
 own clipping under `jit` would otherwise hide it; clip a Gaussian policy's
 samples with `gymnasium.wrappers.vector.ClipAction` / `ClipAction`). `step`
 before `reset` (and `NavGymEnv.step` after an episode ended) raises
@@ -163,7 +163,8 @@ def check_actions(actions, shape: tuple[int, ...], who: str) -> np.ndarray:
     float32 array of `shape`.
 
   Raises:
-    ValueError: another shape, a non-floating dtype, a NaN or infinity, or a value outside [-1, 1].
+    ValueError: another shape, a non-floating dtype, a NaN or infinity, a value outside [-1, 1], or a
+      nonzero value below float32's smallest normal number in magnitude.
   """
   a = np.asarray(actions)
   want = f"float32 {list(shape)} of (v, w) per robot in [-1, 1]"
@@ -180,6 +181,11 @@ def check_actions(actions, shape: tuple[int, ...], who: str) -> np.ndarray:
     i = tuple(int(v) for v in np.argwhere(out)[0])
     raise ValueError(f"{who}: actions must lie in [-1, 1] (the action space; clip a policy's samples "
                      f"with gymnasium's ClipAction wrapper); got {a[i]} at index {list(i)}")
+  tiny = (a != 0) & (np.abs(a) < np.finfo(np.float32).tiny)
+  if tiny.any():
+    i = tuple(int(v) for v in np.argwhere(tiny)[0])
+    raise ValueError(f"{who}: actions must be 0 or at least {np.finfo(np.float32).tiny:.3g} in magnitude "
+                     f"(float32 would make {a[i]!r} at index {list(i)} subnormal or 0)")
   return a.astype(np.float32)
 
 

@@ -62,7 +62,7 @@ from PIL import Image
 
 from jaxfilters.grid import OccupancyGrid
 from jaxfilters.map_io import load_map, load_map_image
-from tests import fuzz_jaus, fuzz_params, fuzz_policy, fuzz_poses
+from tests import fuzz_actions, fuzz_jaus, fuzz_params, fuzz_policy, fuzz_poses
 
 OK_OUTCOMES = ("loaded", "ValueError", "FileNotFoundError")
 MAX_MESSAGE = 1000
@@ -513,6 +513,7 @@ TARGETS: dict[str, Target] = {
                           fuzz_policy.json_edit),
     "policy-msgpack": Target(fuzz_policy.run_msgpack, lambda: [Seed(d) for d in fuzz_policy.msgpack_seeds()],
                              fuzz_policy.msgpack_edit),
+    "gym-actions": Target(fuzz_actions.run, lambda: [Seed(d) for d in fuzz_actions.seeds()], fuzz_actions.edit),
 }
 
 

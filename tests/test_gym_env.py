@@ -167,7 +167,9 @@ def test_vector_wrong_actions_raise(venv):
            (ok.astype(bool), "got dtype bool"),
            (np.where(np.eye(N, 2, dtype=bool), np.nan, ok), r"must be finite .* got nan at index \[0, 0\]"),
            (np.where(np.eye(N, 2, k=1, dtype=bool), -np.inf, ok), r"got -inf at index \[0, 1\]"),
-           (np.full((N, 2), 0.5) + np.eye(N, 2), r"must lie in \[-1, 1\].*got 1.5 at index \[0, 0\]")]
+           (np.full((N, 2), 0.5) + np.eye(N, 2), r"must lie in \[-1, 1\].*got 1.5 at index \[0, 0\]"),
+           (np.where(np.eye(N, 2, k=1, dtype=bool), 1e-50, 0.25), r"float32 would make 1e-50 at index \[0, 1\] subnormal or 0"),
+           (np.full((N, 2), -2e-39), r"at least 1.18e-38 in magnitude")]
   for bad, match in cases:
     with pytest.raises(ValueError, match=match):
       venv.step(bad)
