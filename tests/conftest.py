@@ -1,9 +1,33 @@
-"""Test-wide settings: strict rank promotion (silent broadcasting raises), hypothesis budget."""
+"""Test-wide settings: strict rank promotion (silent broadcasting raises), hypothesis budget,
+and one persistent XLA compilation cache for the session.
+
+The cache: the suite compiles the same programs in several processes (the two xdist workers,
+the CLI subprocesses, the notebook kernels: each builds the default fleet world, for one). The
+first process to run `pytest` makes a fresh temporary folder, names it in
+JAX_COMPILATION_CACHE_DIR (child processes inherit it; JAX reads it when imported, and this
+process, which has imported JAX already, sets it in jax.config) and removes it when the session
+ends, so nothing is written outside the session and no run sees
+another run's executables. The cache key is the compiled program with its compile options,
+XLA_FLAGS and jaxlib version, so a hit is the same executable a compile would give; the
+compile-count listener of tests/compile_count.py still counts a hit as a compile.
+"""
 
 import os
+import shutil
+import tempfile
 from pathlib import Path
 
-from jaxfilters import xla_flags
+SESSION_CACHE_ENV = "JAXFILTERS_TEST_XLA_CACHE"
+_OWN_CACHE = None
+if os.environ.get(SESSION_CACHE_ENV) is None:       # the first pytest process: xdist workers inherit it
+  _OWN_CACHE = tempfile.mkdtemp(prefix="jaxfilters-test-xla-")
+  os.environ[SESSION_CACHE_ENV] = _OWN_CACHE
+  os.environ["JAX_COMPILATION_CACHE_DIR"] = _OWN_CACHE
+  # Programs that compile in 0.5 s or more are written; smaller ones cost more to store than to redo.
+  os.environ["JAX_PERSISTENT_CACHE_MIN_COMPILE_TIME_SECS"] = "0.5"
+  os.environ["JAX_PERSISTENT_CACHE_MIN_ENTRY_SIZE_BYTES"] = "-1"
+
+from jaxfilters import xla_flags  # noqa: E402
 
 # Before JAX starts (see jaxfilters/xla_flags.py); the CLI and the benchmarks do the same.
 xla_flags.use_fast_cpu_compile()
@@ -13,6 +37,15 @@ import pytest
 from hypothesis import HealthCheck, settings
 
 jax.config.update("jax_numpy_rank_promotion", "raise")
+jax.config.update("jax_compilation_cache_dir", os.environ["JAX_COMPILATION_CACHE_DIR"])
+jax.config.update("jax_persistent_cache_min_compile_time_secs",
+                  float(os.environ["JAX_PERSISTENT_CACHE_MIN_COMPILE_TIME_SECS"]))
+jax.config.update("jax_persistent_cache_min_entry_size_bytes",
+                  int(os.environ["JAX_PERSISTENT_CACHE_MIN_ENTRY_SIZE_BYTES"]))
+# JAX opens its persistent cache at the first compile and keeps that folder for the process; one
+# tiny compile now makes it the session's folder, whatever a test later sets (`jaxfilters fleet`
+# without --no-cache points jax_compilation_cache_dir at the user's cache).
+jax.jit(lambda x: x + 1)(0).block_until_ready()
 
 settings.register_profile(
     "ci", max_examples=60, deadline=None,
@@ -29,3 +62,10 @@ def nav2_maps() -> Path:
     pytest.skip(f"real Nav2 maps not found at {NAV2_MAPS} (a fresh clone has no ../shared); "
                 "these tests need the shared/maps/nav2 folder beside the checkout")
   return NAV2_MAPS
+
+
+def pytest_unconfigure(config):
+  """Removes the session's compilation cache (only in the process that made it)."""
+  del config
+  if _OWN_CACHE is not None:
+    shutil.rmtree(_OWN_CACHE, ignore_errors=True)
