@@ -64,6 +64,31 @@ def nav2_maps() -> Path:
   return NAV2_MAPS
 
 
+# The files that take longest (CPU time on a 2-core machine, longest first). `make test` hands whole
+# files to its two workers in the order the collection lists them; these go first, so that the
+# short files fill in at the end instead of one worker running a long file alone while the other
+# has nothing left. pytest-xdist's default order (files with the most tests first) would start
+# these last: most have few tests.
+SLOW_FILES = ("test_notebooks.py", "test_sharding.py", "test_rl_cli.py", "test_rl.py", "test_readme.py",
+              "test_sims_fleet.py", "test_layers.py", "test_keepout_paths.py", "test_bag.py",
+              "test_sims_keepout_escape.py", "test_prologue.py", "test_fast_paths.py", "test_cli_matrix.py",
+              "test_keepout_pallas.py", "test_cli.py", "test_shapes.py", "test_rl_layouts.py",
+              "test_gym_env.py", "test_keepout_footprint.py", "test_map_fuzz.py")
+
+
+def pytest_configure(config):
+  """Keeps the collection order for --dist loadfile (see SLOW_FILES)."""
+  if getattr(config.option, "loadscopereorder", None):
+    config.option.loadscopereorder = False
+
+
+def pytest_collection_modifyitems(config, items):
+  """SLOW_FILES first, in that order; the other files after them as collected (a stable sort)."""
+  del config
+  rank = {name: i for i, name in enumerate(SLOW_FILES)}
+  items.sort(key=lambda item: rank.get(item.path.name, len(rank)))
+
+
 def pytest_unconfigure(config):
   """Removes the session's compilation cache (only in the process that made it)."""
   del config
