@@ -1,9 +1,33 @@
-"""Test-wide settings: strict rank promotion (silent broadcasting raises), hypothesis budget."""
+"""Test-wide settings: strict rank promotion (silent broadcasting raises), hypothesis budget,
+and one persistent XLA compilation cache for the session.
+
+The cache: the suite compiles the same programs in several processes (the two xdist workers,
+the CLI subprocesses, the notebook kernels: each builds the default fleet world, for one). The
+first process to run `pytest` makes a fresh temporary folder, names it in
+JAX_COMPILATION_CACHE_DIR (child processes inherit it; JAX reads it when imported, and this
+process, which has imported JAX already, sets it in jax.config) and removes it when the session
+ends, so nothing is written outside the session and no run sees
+another run's executables. The cache key is the compiled program with its compile options,
+XLA_FLAGS and jaxlib version, so a hit is the same executable a compile would give; the
+compile-count listener of tests/compile_count.py still counts a hit as a compile.
+"""
 
 import os
+import shutil
+import tempfile
 from pathlib import Path
 
-from jaxfilters import xla_flags
+SESSION_CACHE_ENV = "JAXFILTERS_TEST_XLA_CACHE"
+_OWN_CACHE = None
+if os.environ.get(SESSION_CACHE_ENV) is None:       # the first pytest process: xdist workers inherit it
+  _OWN_CACHE = tempfile.mkdtemp(prefix="jaxfilters-test-xla-")
+  os.environ[SESSION_CACHE_ENV] = _OWN_CACHE
+  os.environ["JAX_COMPILATION_CACHE_DIR"] = _OWN_CACHE
+  # Programs that compile in 0.5 s or more are written; smaller ones cost more to store than to redo.
+  os.environ["JAX_PERSISTENT_CACHE_MIN_COMPILE_TIME_SECS"] = "0.5"
+  os.environ["JAX_PERSISTENT_CACHE_MIN_ENTRY_SIZE_BYTES"] = "-1"
+
+from jaxfilters import xla_flags  # noqa: E402
 
 # Before JAX starts (see jaxfilters/xla_flags.py); the CLI and the benchmarks do the same.
 xla_flags.use_fast_cpu_compile()
@@ -13,6 +37,15 @@ import pytest
 from hypothesis import HealthCheck, settings
 
 jax.config.update("jax_numpy_rank_promotion", "raise")
+jax.config.update("jax_compilation_cache_dir", os.environ["JAX_COMPILATION_CACHE_DIR"])
+jax.config.update("jax_persistent_cache_min_compile_time_secs",
+                  float(os.environ["JAX_PERSISTENT_CACHE_MIN_COMPILE_TIME_SECS"]))
+jax.config.update("jax_persistent_cache_min_entry_size_bytes",
+                  int(os.environ["JAX_PERSISTENT_CACHE_MIN_ENTRY_SIZE_BYTES"]))
+# JAX opens its persistent cache at the first compile and keeps that folder for the process; one
+# tiny compile now makes it the session's folder, whatever a test later sets (`jaxfilters fleet`
+# without --no-cache points jax_compilation_cache_dir at the user's cache).
+jax.jit(lambda x: x + 1)(0).block_until_ready()
 
 settings.register_profile(
     "ci", max_examples=60, deadline=None,
@@ -29,3 +62,35 @@ def nav2_maps() -> Path:
     pytest.skip(f"real Nav2 maps not found at {NAV2_MAPS} (a fresh clone has no ../shared); "
                 "these tests need the shared/maps/nav2 folder beside the checkout")
   return NAV2_MAPS
+
+
+# The files that take longest (CPU time on a 2-core machine, longest first). `make test` hands whole
+# files to its two workers in the order the collection lists them; these go first, so that the
+# short files fill in at the end instead of one worker running a long file alone while the other
+# has nothing left. pytest-xdist's default order (files with the most tests first) would start
+# these last: most have few tests.
+SLOW_FILES = ("test_notebooks.py", "test_sharding.py", "test_rl_cli.py", "test_rl.py", "test_readme.py",
+              "test_sims_fleet.py", "test_layers.py", "test_keepout_paths.py", "test_bag.py",
+              "test_sims_keepout_escape.py", "test_prologue.py", "test_fast_paths.py", "test_cli_matrix.py",
+              "test_keepout_pallas.py", "test_cli.py", "test_shapes.py", "test_rl_layouts.py",
+              "test_gym_env.py", "test_keepout_footprint.py", "test_map_fuzz.py")
+
+
+def pytest_configure(config):
+  """Keeps the collection order for --dist loadfile (see SLOW_FILES)."""
+  if getattr(config.option, "loadscopereorder", None):
+    config.option.loadscopereorder = False
+
+
+def pytest_collection_modifyitems(config, items):
+  """SLOW_FILES first, in that order; the other files after them as collected (a stable sort)."""
+  del config
+  rank = {name: i for i, name in enumerate(SLOW_FILES)}
+  items.sort(key=lambda item: rank.get(item.path.name, len(rank)))
+
+
+def pytest_unconfigure(config):
+  """Removes the session's compilation cache (only in the process that made it)."""
+  del config
+  if _OWN_CACHE is not None:
+    shutil.rmtree(_OWN_CACHE, ignore_errors=True)

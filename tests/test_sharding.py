@@ -1,10 +1,13 @@
 """sims/sharding.py: sharded rollouts equal unsharded ones; `jaxfilters fleet --devices`; two processes.
 
 The test process has already started JAX with one CPU device, so every check
-runs in a fresh subprocess with XLA_FLAGS=--xla_force_host_platform_device_count
-(8 devices for one process; 2 x 2 devices for the jax.distributed run).
-Integer outputs (goals, goal counts, keepout entries, stuck events, the
-recorded goals of every step) must be equal exactly.
+runs in a fresh subprocess with XLA_FLAGS=--xla_force_host_platform_device_count=4:
+one process for the sharded rollouts, the mesh errors and the command line, and
+2 x 4 devices for the jax.distributed run. All of them use the same XLA flags, so
+the later processes load the world-building programs the first one compiled from
+the session's compilation cache (tests/conftest.py). Integer outputs (goals, goal
+counts, keepout entries, stuck events, the recorded goals of every step) must be
+equal exactly.
 """
 
 import json
@@ -20,39 +23,35 @@ import pytest
 
 ROOT = Path(__file__).resolve().parents[1]
 WORLDS, STEPS, K = 8, 4, 2
+DEVICES = 4                  # CPU devices of every subprocess
 
 
-def _env(devices: int) -> dict:
+def _env() -> dict:
   env = dict(os.environ)
-  env["XLA_FLAGS"] = (env.get("XLA_FLAGS", "") + f" --xla_force_host_platform_device_count={devices}").strip()
+  env["XLA_FLAGS"] = (env.get("XLA_FLAGS", "") + f" --xla_force_host_platform_device_count={DEVICES}").strip()
   env["JAX_PLATFORMS"] = "cpu"
   env["PYTHONPATH"] = str(ROOT) + os.pathsep + env.get("PYTHONPATH", "")
   return env
 
 
-def _run(code: str, devices: int, timeout: float = 900) -> subprocess.CompletedProcess:
-  return subprocess.run([sys.executable, "-c", textwrap.dedent(code)], env=_env(devices), cwd=ROOT,
-                        capture_output=True, text=True, timeout=timeout)
-
-
 SINGLE = f"""
 from jaxfilters import xla_flags
 xla_flags.use_fast_cpu_compile()
-import json, sys
+import contextlib, io, json, sys
 import jax, jax.numpy as jnp, numpy as np
 from sims import sharding
 from sims.config import FleetConfig
 from sims.env import FleetEnv
 
-assert len(jax.devices()) == 8, jax.devices()
+assert len(jax.devices()) == {DEVICES}, jax.devices()
 out = {{}}
 env = FleetEnv.create(config=FleetConfig(robots_per_world={K}))
 keys = env.world_keys(jax.random.PRNGKey(0), {WORLDS})
 plain = env.rollout_fn({STEPS})(env.params, env.reset_fn()(env.params, keys))
 ref = {{k: np.asarray(v) for k, v in sharding.integer_outputs(*plain).items()}}
-np.savez(sys.argv[1] if len(sys.argv) > 1 else "ref.npz", **ref)
+np.savez(sys.argv[1], **ref)
 
-mesh = sharding.make_mesh(8)
+mesh = sharding.make_mesh({DEVICES})
 s0 = env.reset_fn(mesh=mesh)(sharding.put_global(env.params, sharding.replicated(mesh)),
                               sharding.put_global(keys, sharding.worlds_sharding(mesh)))
 states, frames = env.rollout_fn({STEPS}, mesh=mesh)(env.params, s0)
@@ -86,7 +85,7 @@ out["rl_moved"] = float(np.min(np.linalg.norm(np.asarray(s.data.qpos[:, 0, :2])
 
 # Mesh errors.
 errs = []
-for bad in (0, 9, "most"):
+for bad in (0, {DEVICES + 1}, "most"):
   try:
     sharding.make_mesh(bad)
   except ValueError as e:
@@ -96,31 +95,47 @@ try:
 except ValueError as e:
   errs.append(str(e))
 out["errors"] = errs
+
+# The command line, in this process: three bad --devices (exit 2) and one run over all devices.
+from jaxfilters import cli
+codes, err = [], io.StringIO()
+with contextlib.redirect_stderr(err):
+  for argv in (["fleet", "--devices", "3", "--robots", "8", "--robots-per-world", "2", "--steps", "1"],
+               ["fleet", "--devices", "{DEVICES + 1}", "--robots", "8", "--robots-per-world", "2", "--steps", "1"],
+               ["fleet", "--devices", "two", "--robots", "8", "--steps", "1"]):
+    codes.append(cli.main(argv))
+  codes.append(cli.main(["fleet", "--devices", "all", "--robots", "8", "--robots-per-world", "1", "--steps", "1",
+                         "--out", sys.argv[2], "--no-cache", "--record-robots", "2"]))
+out["cli_codes"] = codes
+out["cli_stderr"] = err.getvalue()
 print("RESULT " + json.dumps(out))
 """
 
 
 @pytest.fixture(scope="module")
 def single(tmp_path_factory):
-  ref = tmp_path_factory.mktemp("shard") / "ref.npz"
-  r = _run(SINGLE.replace('sys.argv[1] if len(sys.argv) > 1 else "ref.npz"', repr(str(ref))), devices=8)
+  """One 4-device process: (its RESULT dict, the unsharded reference npz, the CLI run's out folder)."""
+  folder = tmp_path_factory.mktemp("shard")
+  ref, fleet_out = folder / "ref.npz", folder / "fleet"
+  r = subprocess.run([sys.executable, "-c", textwrap.dedent(SINGLE), str(ref), str(fleet_out)], env=_env(), cwd=ROOT,
+                     capture_output=True, text=True, timeout=900)
   assert r.returncode == 0, r.stderr[-3000:]
   line = [l for l in r.stdout.splitlines() if l.startswith("RESULT ")][-1]
-  return json.loads(line[len("RESULT "):]), ref
+  return json.loads(line[len("RESULT "):]), ref, fleet_out
 
 
 def test_sharded_fleet_rollout_equals_unsharded(single):
-  out, _ = single
+  out, _, _ = single
   assert out["equal"] == {k: True for k in ("goal", "goals_reached", "keepout_entries", "stuck_events",
                                             "frame_goal")}
-  assert out["state_devices"] == 8 and out["shard_shape"] == [WORLDS // 8, K]
+  assert out["state_devices"] == DEVICES and out["shard_shape"] == [WORLDS // DEVICES, K]
   assert out["state_spec"] == ["worlds"]
   assert out["frame_spec"] == [None, "worlds"]
   assert out["pose_max_diff"] < 1e-5          # same program per world; floats agree too
 
 
 def test_sharded_rl_env_equals_unsharded(single):
-  out, _ = single
+  out, _, _ = single
   assert out["rl_devices"] == 4
   assert out["rl_goal_equal"] and out["rl_done_equal"]
   assert out["rl_obs_max_diff"] < 1e-5
@@ -128,38 +143,23 @@ def test_sharded_rl_env_equals_unsharded(single):
 
 
 def test_mesh_errors_name_expected_and_got(single):
-  out, _ = single
+  out, _, _ = single
   e = out["errors"]
-  assert "between 1 and the 8 available" in e[0] and "got 0" in e[0]
-  assert "got 9" in e[1]
+  assert f"between 1 and the {DEVICES} available" in e[0] and "got 0" in e[0]
+  assert f"got {DEVICES + 1}" in e[1]
   assert "'all', an int or a list" in e[2]
   assert "worlds (6) must be a multiple of the number of devices (4)" in e[3]
 
 
-def test_cli_devices(tmp_path):
-  code = """
-  import json, sys
-  from jaxfilters import cli
-  codes = []
-  for argv in (["fleet", "--devices", "3", "--robots", "8", "--robots-per-world", "2", "--steps", "1"],
-               ["fleet", "--devices", "9", "--robots", "8", "--robots-per-world", "2", "--steps", "1"],
-               ["fleet", "--devices", "two", "--robots", "8", "--steps", "1"]):
-    codes.append(cli.main(argv))
-  codes.append(cli.main(["fleet", "--devices", "all", "--robots", "8", "--robots-per-world", "1", "--steps", "1",
-                         "--out", sys.argv[1], "--no-cache", "--record-robots", "2"]))
-  print("CODES " + json.dumps(codes))
-  """
-  out = tmp_path / "fleet"
-  r = subprocess.run([sys.executable, "-c", textwrap.dedent(code), str(out)], env=_env(4), cwd=ROOT,
-                     capture_output=True, text=True, timeout=900)
-  assert r.returncode == 0, r.stderr[-3000:]
-  codes = json.loads([l for l in r.stdout.splitlines() if l.startswith("CODES ")][-1][6:])
-  assert codes == [2, 2, 2, 0], r.stderr[-3000:]
-  assert "worlds (4) must be a multiple of the number of devices (3)" in r.stderr
-  assert "between 1 and the 4 available" in r.stderr and "got 9" in r.stderr
-  assert "--devices must be a positive integer or 'all'; got 'two'" in r.stderr
-  summary = json.loads((out / "summary.json").read_text())
-  assert summary["config"]["devices"] == 4 and summary["config"]["worlds"] == 8
+def test_cli_devices(single):
+  out, _, fleet_out = single
+  codes, stderr = out["cli_codes"], out["cli_stderr"]
+  assert codes == [2, 2, 2, 0], stderr[-3000:]
+  assert "worlds (4) must be a multiple of the number of devices (3)" in stderr
+  assert f"between 1 and the {DEVICES} available" in stderr and f"got {DEVICES + 1}" in stderr
+  assert "--devices must be a positive integer or 'all'; got 'two'" in stderr
+  summary = json.loads((fleet_out / "summary.json").read_text())
+  assert summary["config"]["devices"] == DEVICES and summary["config"]["worlds"] == 8
 
 
 def _free_port() -> int:
@@ -169,14 +169,14 @@ def _free_port() -> int:
 
 
 def test_two_processes_jax_distributed(single, tmp_path):
-  _, ref_path = single
+  _, ref_path, _ = single
   port = _free_port()
   procs = []
   for i in range(2):
     cmd = [sys.executable, "-m", "sims.scripts.sharding", "--coordinator", f"127.0.0.1:{port}", "--num-processes", "2",
            "--process-id", str(i), "--worlds", str(WORLDS), "--steps", str(STEPS), "--robots-per-world", str(K),
            "--out", str(tmp_path / f"p{i}.npz")]
-    procs.append(subprocess.Popen(cmd, env=_env(2), cwd=ROOT, stdout=subprocess.PIPE, stderr=subprocess.PIPE,
+    procs.append(subprocess.Popen(cmd, env=_env(), cwd=ROOT, stdout=subprocess.PIPE, stderr=subprocess.PIPE,
                                   text=True))
   outs = []
   try:
