@@ -263,10 +263,15 @@ def _train_with_curve(adapter, algo, key, *, num_calls, num_eval, callback, mesh
                     out_shardings=shardings)
   # The two programs compile at the same time (XLA compiles outside the GIL): the wall time is
   # the longer compile, not the sum.
+  # jax's config contexts are per thread: each compile thread sets rejax's rank promotion again.
+  def compile_in_thread(fn, *args):
+    with jax.numpy_rank_promotion("allow"):
+      return fn.lower(*args).compile(), time.perf_counter()
+
   t0 = time.perf_counter()
   with concurrent.futures.ThreadPoolExecutor(2) as pool:
-    train_f = pool.submit(lambda: (train.lower(ts).compile(), time.perf_counter()))
-    eval_f = pool.submit(lambda: (evaluate.lower(ts, k_eval).compile(), time.perf_counter()))
+    train_f = pool.submit(compile_in_thread, train, ts)
+    eval_f = pool.submit(compile_in_thread, evaluate, ts, k_eval)
     (train_c, t_train), (eval_c, t_eval) = train_f.result(), eval_f.result()
   evals = {n: [] for n in (*EVAL_KEYS, "env_steps")}
   train_s = 0.0
