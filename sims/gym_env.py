@@ -185,7 +185,7 @@ def check_actions(actions, shape: tuple[int, ...], who: str) -> np.ndarray:
   if tiny.any():
     i = tuple(int(v) for v in np.argwhere(tiny)[0])
     raise ValueError(f"{who}: actions must be 0 or at least {np.finfo(np.float32).tiny:.3g} in magnitude "
-                     f"(float32 would make {a[i]!r} at index {list(i)} subnormal or 0)")
+                     f"(float32 would make {a[i]} at index {list(i)} subnormal or 0)")
   return a.astype(np.float32)
 
 

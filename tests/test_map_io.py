@@ -780,7 +780,7 @@ def test_hostile_yaml(mapdir, text, match):
   start = _time.perf_counter()
   with pytest.raises(ValueError, match=match) as e:
     load_map(mapdir / "m.yaml")
-  assert _time.perf_counter() - start < 2.0
+  assert _time.perf_counter() - start < 30.0   # a blow-up (exponential parsing, a huge allocation) takes far longer; not a speed test
   assert str(mapdir / "m.yaml") in str(e.value) and len(str(e.value)) < 600
 
 
@@ -890,7 +890,7 @@ def test_png_bomb_rejected_before_decoding(mapdir):
                                  png_chunk(b"IEND", b""))
   with pytest.raises(ValueError, match="holds only 12 compressed bytes"):
     load_map(y)
-  assert _time.perf_counter() - start < 2.0
+  assert _time.perf_counter() - start < 30.0   # a blow-up (exponential parsing, a huge allocation) takes far longer; not a speed test
 
 
 def test_cell_cap_is_checked_from_the_header(mapdir):
