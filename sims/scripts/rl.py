@@ -284,7 +284,8 @@ def run_train(args) -> int:
     except ValueError as e:
       raise CliError(f"--devices: {e} (the envs are --num-envs)") from None
   n_dev = 1 if mesh is None else int(mesh.devices.size)
-  _check_device_minibatches(args, n_dev)
+  if devices == "all":                # a device count given as a number was checked before --out
+    _check_device_minibatches(args, n_dev)
   env, fn = training_env(None, randomize=args.randomize, seed=args.seed, layouts=args.layouts,
                          config=NavEnvConfig(keepout=args.keepout, costmap_stop=args.costmap_stop))
   adapter = GymnaxAdapter(env, args.episode_length, fn, full_reset=args.randomize)
@@ -324,10 +325,10 @@ def run_train(args) -> int:
               extra=_finite({"seed": args.seed, "randomize": args.randomize, "env_steps": steps,
                              "final": final}))
   wall = time.perf_counter() - t_start
-  compile_s = timing.pop("compile_s")
+  compile_s = timing["compile_s"]
   result = {"trainer": "rejax.PPO", "jax": jax.__version__,
             "device": {"kind": dev.device_kind, "platform": dev.platform, "count": n_dev, **placement},
-            "timing": {"compile_s": compile_s, **timing, "wall_s": wall,
+            "timing": {**timing, "wall_s": wall,
                        "env_steps_per_s": steps / timing["train_s"] if timing["train_s"] else None},
             "env_steps": steps, "final": final, "initial": {k: v[0] for k, v in evals.items()},
             "curve": evals, "config": config}
