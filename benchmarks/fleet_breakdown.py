@@ -21,7 +21,7 @@ is a difference of two measured figures:
 | candidates_3 / candidates_half / candidates_double | full with 3, about half or twice the planner's candidates |
 | const_costmap_lookups / const_speed_lookups / const_nav_lookups / const_lookups | full with the planner's local-costmap, speed-cap or navigation-field lookups (or all three) replaced by constants |
 | controller_10hz | full with the controller at 10 Hz (same costmap rate) |
-| rollout_cumsum / rollout_chain | full with the planner's rollout sums forced to one mode (`planner.rollout_grid`; the default is cumsum on CPU, chain elsewhere) |
+| rollout_cumsum / rollout_chain / rollout_fused | full with the planner forced to one mode (`planner.rollout_mode`: the rollout sums as one cumsum or a chain of adds, then each rule over the points; or every rule folded into one pass over the steps; the default is cumsum on CPU, fused elsewhere) |
 
 Each variant is compiled and timed in its own try block; a failure is reported
 as a string and the others still run. Progress goes to stderr; stdout gets one
@@ -128,16 +128,6 @@ class VariantEnv(FleetEnv):
     return dataclasses.replace(s, data=data)
 
 
-def _const_costmap(*args):
-  xy = args[-1]
-  return jnp.zeros(xy.shape[:-1], jnp.int32)
-
-
-def _const_speed(*args):
-  xy = args[-1]
-  return jnp.full(xy.shape[:-1], jnp.inf, _F32)
-
-
 def _const_lut(lut, origin, res, x, y):
   del lut, origin, res, x
   return jnp.zeros(jnp.shape(y), jnp.uint16)
@@ -165,13 +155,14 @@ def _const_value_and_direction(field, goal, xy):
 # Planner lookups a variant replaces by constants: (module, attribute, replacement). Attributes that a
 # version of sims/planner.py lacks are skipped (and listed in the variant's result).
 _LOOKUPS = {
-    "costmap": [(planner, "local_cost_at", _const_costmap), (planner, "lut_at", _const_lut)],
-    "speed": [(planner, "speed_cap_at", _const_speed), (planner, "speed_cap_xy", _const_speed_xy)],
+    "costmap": [(planner, "lut_at", _const_lut)],
+    "speed": [(planner, "speed_cap_xy", _const_speed_xy)],
     "nav": [(navigation, "nav_value", _const_nav_value), (navigation, "descent_direction", _const_descent),
             (navigation, "value_and_direction", _const_value_and_direction)],
-    # Not lookups: the two ways sims/planner.py can sum the rollouts (its default depends on the backend).
+    # Not lookups: the ways sims/planner.py can run the candidates (its default depends on the backend).
     "rollout_cumsum": [(planner, "rollout_mode", lambda: "cumsum")],
     "rollout_chain": [(planner, "rollout_mode", lambda: "chain")],
+    "rollout_fused": [(planner, "rollout_mode", lambda: "fused")],
 }
 
 
@@ -221,6 +212,7 @@ def variants(base: FleetConfig) -> dict:
       "controller_10hz": (dataclasses.replace(base, controller_hz=10.0), {}, ()),
       "rollout_cumsum": (base, {}, ("rollout_cumsum",)),
       "rollout_chain": (base, {}, ("rollout_chain",)),
+      "rollout_fused": (base, {}, ("rollout_fused",)),
   }
 
 

@@ -103,48 +103,6 @@ def _cos_sin_small(a: jax.Array) -> tuple[jax.Array, jax.Array]:
           a * (1.0 - a2 * (1.0 / 6.0 - a2 * (1.0 / 120.0 - a2 / 5040.0))))
 
 
-def rollout(pose: jax.Array, cmd: jax.Array, targets: jax.Array, config: FleetConfig):
-  """Unicycle rollouts with acceleration limits.
-
-  Each step ramps (v, w) toward the target within the acceleration limits, then
-  moves along the midpoint heading. The heading is carried as a unit vector
-  rotated by small-angle series (|w| dt is small), so the C x T rollout needs
-  no sin/cos calls, which dominate its cost on CPU.
-
-  Args:
-    pose: float32 [3] (x, y, yaw).
-    cmd: float32 [2] the last command (v, w).
-    targets: float32 [C, 2] target twists.
-    config: static FleetConfig.
-
-  Returns:
-    (xy float32 [C, T+1, 2] with xy[:, 0] = pose, heading unit vectors
-    float32 [C, 2] at the end, v float32 [C, T+1]).
-  """
-  _check_series(config)
-  p, r = config.planner, config.robot
-  dt = p.rollout_dt
-  c = targets.shape[0]
-  x = jnp.full((c,), pose[0])
-  y = jnp.full((c,), pose[1])
-  hc = jnp.full((c,), jnp.cos(pose[2]))
-  hs = jnp.full((c,), jnp.sin(pose[2]))
-  v = jnp.full((c,), cmd[0])
-  w = jnp.full((c,), cmd[1])
-  xs, ys, vs = [x], [y], [v]
-  for _ in range(p.num_rollout_steps):
-    v = v + jnp.clip(targets[:, 0] - v, -r.max_accel * dt, r.max_accel * dt)
-    w = w + jnp.clip(targets[:, 1] - w, -r.max_yaw_accel * dt, r.max_yaw_accel * dt)
-    ch, sh = _cos_sin_small(0.5 * w * dt)
-    mc, ms = hc * ch - hs * sh, hs * ch + hc * sh          # midpoint heading
-    x = x + v * dt * mc
-    y = y + v * dt * ms
-    hc, hs = mc * ch - ms * sh, ms * ch + mc * sh          # end-of-step heading
-    xs.append(x), ys.append(y), vs.append(v)
-  xy = jnp.stack([jnp.stack(xs, 1), jnp.stack(ys, 1)], axis=-1)
-  return xy, jnp.stack([hc, hs], axis=1), jnp.stack(vs, 1)
-
-
 def _check_series(config: FleetConfig) -> None:
   r, dt = config.robot, config.planner.rollout_dt
   if r.max_yaw_rate * dt > 0.6:
@@ -153,46 +111,38 @@ def _check_series(config: FleetConfig) -> None:
 
 
 def rollout_mode() -> str:
-  """The default `rollout_grid` mode of this backend (see there)."""
-  return "cumsum" if jax.default_backend() == "cpu" else "chain"
+  """How `evaluate_lut` runs the candidates on this backend.
+
+  "cumsum" or "chain": `rollout_grid` in that mode, then each rule over the
+  [Nv, Nw, T] points; "fused": `one_pass_terms`, every rule folded into the
+  rollout step by step. "cumsum" on CPU, "fused" elsewhere
+  (benchmarks/fleet_breakdown.py times all three).
+  """
+  return "cumsum" if jax.default_backend() == "cpu" else "fused"
 
 
-def rollout_grid(pose: jax.Array, cmd: jax.Array, speeds: jax.Array, yaw_rates: jax.Array,
-                 config: FleetConfig, *, mode: str | None = None) -> dict:
-  """`rollout` of the candidate grid speeds x yaw_rates, sharing what candidates share.
+def ramp_tables(pose: jax.Array, cmd: jax.Array, speeds: jax.Array, yaw_rates: jax.Array,
+                config: FleetConfig) -> dict:
+  """What the candidates of a grid share: speed ramps per target speed, headings per target yaw rate.
 
   A candidate's speed profile depends only on its target speed and its heading
   only on its target yaw rate, so the ramps run once per speed (Nv) and the
-  heading rotations once per yaw rate (Nw), as [Nv, T] and [Nw, T] tables; each
-  candidate's points then add up its steps (v_t dt) (cos, sin)(midpoint heading_t),
-  and its interval midpoints are the points less half a step. The ramps and
-  headings are `rollout`'s float32 operations; the positions differ from its
-  step-by-step sums by float rounding (< 1e-5 m over the horizon;
-  tests/test_fleet_perf.py).
-
-  `mode` picks how the sums run: "cumsum" (one cumulative sum over T, the
-  points materialised behind an optimization barrier: XLA:CPU otherwise fuses
-  the chain into every consumer) or "chain" (T dependent adds and no barrier,
-  so a GPU can fuse the whole rollout into each lookup instead of writing and
-  re-reading [Nv, Nw, T] arrays per robot); None picks "cumsum" on CPU and
-  "chain" elsewhere. benchmarks/fleet_breakdown.py times both.
+  heading rotations once per yaw rate (Nw). Each step ramps (v, w) toward the
+  target within the acceleration limits and moves along the midpoint heading,
+  carried as a unit vector rotated by small-angle series (|w| dt is small), so
+  no sin/cos call runs per step (they dominate the cost on CPU).
 
   Args:
-    pose: float32 [3] (x, y, yaw).
-    cmd: float32 [2] the last command (v, w).
+    pose: float32 [3] (x, y, yaw); cmd: float32 [2] the last command (v, w).
     speeds: float32 [Nv] target speeds (m/s); yaw_rates: float32 [Nw] (rad/s).
     config: static FleetConfig.
-    mode: static "cumsum", "chain" or None (see above).
 
   Returns:
-    dict of float32 arrays: 'x', 'y' [Nv, Nw, T] rollout points 1..T (m),
-    'mx', 'my' [Nv, Nw, T] interval midpoints (m), 'v' [Nv, T+1] speed profile
-    (v[:, 0] = cmd[0]), 'hc', 'hs' [Nw] heading unit vector at the end.
+    dict: 'v' float32 [Nv, T+1] speed profile (v[:, 0] = cmd[0]); 'mc', 'ms'
+    lists of T float32 [Nw], the midpoint heading of each step; 'hc', 'hs'
+    float32 [Nw] the heading at the end.
   """
   _check_series(config)
-  mode = rollout_mode() if mode is None else mode
-  if mode not in ("cumsum", "chain"):
-    raise ValueError(f"rollout_grid mode must be 'cumsum', 'chain' or None; got {mode!r}")
   p, r = config.planner, config.robot
   dt = p.rollout_dt
   nv, nw = speeds.shape[0], yaw_rates.shape[0]
@@ -208,10 +158,45 @@ def rollout_grid(pose: jax.Array, cmd: jax.Array, speeds: jax.Array, yaw_rates: 
     mc, ms = hc * ch - hs * sh, hs * ch + hc * sh          # midpoint heading [Nw]
     hc, hs = mc * ch - ms * sh, ms * ch + mc * sh          # end-of-step heading
     vs.append(v), mcs.append(mc), mss.append(ms)
-  v = jnp.stack(vs, -1)                                    # [Nv, T+1]
-  vdt = v[:, 1:] * dt                                      # [Nv, T]
-  step_x = vdt[:, None, :] * jnp.stack(mcs, -1)[None, :, :]   # [Nv, Nw, T]
-  step_y = vdt[:, None, :] * jnp.stack(mss, -1)[None, :, :]
+  return {"v": jnp.stack(vs, -1), "mc": mcs, "ms": mss, "hc": hc, "hs": hs}
+
+
+def rollout_grid(pose: jax.Array, cmd: jax.Array, speeds: jax.Array, yaw_rates: jax.Array,
+                 config: FleetConfig, *, mode: str | None = None) -> dict:
+  """Unicycle rollouts of the candidate grid speeds x yaw_rates, with acceleration limits.
+
+  The ramps and headings are `ramp_tables`'; each candidate's points then add
+  up its steps (v_t dt) (cos, sin)(midpoint heading_t), and its interval
+  midpoints are the points less half a step (positions within 1e-5 m of a
+  step-by-step unicycle in float32; tests/test_fleet_perf.py).
+
+  `mode` picks how the sums run: "cumsum" (one cumulative sum over T, the
+  points materialised behind an optimization barrier: XLA:CPU otherwise fuses
+  the chain into every consumer) or "chain" (T dependent adds and no barrier);
+  None picks "cumsum" on CPU and "chain" elsewhere (`one_pass_terms` adds the
+  same steps in the chain's order).
+
+  Args:
+    pose: float32 [3] (x, y, yaw).
+    cmd: float32 [2] the last command (v, w).
+    speeds: float32 [Nv] target speeds (m/s); yaw_rates: float32 [Nw] (rad/s).
+    config: static FleetConfig.
+    mode: static "cumsum", "chain" or None (see above).
+
+  Returns:
+    dict of float32 arrays: 'x', 'y' [Nv, Nw, T] rollout points 1..T (m),
+    'mx', 'my' [Nv, Nw, T] interval midpoints (m), 'v' [Nv, T+1] speed profile
+    (v[:, 0] = cmd[0]), 'hc', 'hs' [Nw] heading unit vector at the end.
+  """
+  if mode is None:
+    mode = "cumsum" if jax.default_backend() == "cpu" else "chain"
+  if mode not in ("cumsum", "chain"):
+    raise ValueError(f"rollout_grid mode must be 'cumsum', 'chain' or None; got {mode!r}")
+  tab = ramp_tables(pose, cmd, speeds, yaw_rates, config)
+  v = tab["v"]                                             # [Nv, T+1]
+  vdt = v[:, 1:] * config.planner.rollout_dt               # [Nv, T]
+  step_x = vdt[:, None, :] * jnp.stack(tab["mc"], -1)[None, :, :]   # [Nv, Nw, T]
+  step_y = vdt[:, None, :] * jnp.stack(tab["ms"], -1)[None, :, :]
   if mode == "cumsum":
     x = pose[0] + jnp.cumsum(step_x, axis=-1)
     y = pose[1] + jnp.cumsum(step_y, axis=-1)
@@ -222,56 +207,102 @@ def rollout_grid(pose: jax.Array, cmd: jax.Array, speeds: jax.Array, yaw_rates: 
   else:
     xs, ys = [], []
     x, y = pose[0], pose[1]
-    for t in range(p.num_rollout_steps):
+    for t in range(config.planner.num_rollout_steps):
       x, y = x + step_x[..., t], y + step_y[..., t]
       xs.append(x), ys.append(y)
     x, y = jnp.stack(xs, -1), jnp.stack(ys, -1)
     out = {"x": x, "y": y, "mx": x - 0.5 * step_x, "my": y - 0.5 * step_y}
-  return {**out, "v": v, "hc": hc, "hs": hs}
+  return {**out, "v": v, "hc": tab["hc"], "hs": tab["hs"]}
 
 
-def local_cost_at(cost: jax.Array, origin: jax.Array, res: jax.Array, xy: jax.Array) -> jax.Array:
-  """Local costmap value at points; NO_INFORMATION outside the window.
+def one_pass_terms(lut, origin, res, pose, cmd, speeds, yaw_rates, speed_cap, speed_mask: FilterMask,
+                   limit_now, others, others_valid, config: FleetConfig, *, full: bool = False) -> dict:
+  """Every candidate's costmap, monitor and speed terms in one pass over the rollout steps.
+
+  The same rules as `rollout_grid` followed by `_costmap_rules`, `_monitor` and
+  `_speed_lookahead`, but each step's point, midpoint, lookups and checks are
+  folded into running per-candidate values (an OR and a MAX of table codes,
+  the smallest distance to each monitored robot, the summed speed excess), so
+  no [Nv, Nw, T] array exists: on a GPU the whole tick is elementwise work
+  over [robots, Nv, Nw] that XLA can fuse into one kernel, instead of writing
+  and re-reading every point per robot. Positions are the "chain" sums of
+  `rollout_grid` (the same operations in the same order, up to the compiler's
+  multiply-add contraction); the speed excess is summed step by step (a
+  reduction may add in another order). Decisions equal the other modes'
+  (tests/test_fleet_perf.py).
 
   Args:
-    cost: uint8 [N, N] local costmap (or `hard_cells` of it).
-    origin: float32 [2] window origin (m); res: float32 [] metres per cell.
-    xy: float32 [..., 2] points (m).
+    lut, origin, res, pose, cmd, limit_now, others, others_valid: as `plan_lut_one`.
+    speeds, yaw_rates: float32 [Nv], [Nw] the candidate grid's axes (`target_axes`).
+    speed_cap, speed_mask: as `plan_lut_one`.
+    config: static FleetConfig.
+    full: static; also return the points 'x', 'y' float32 [Nv, Nw, T].
 
   Returns:
-    int32 [...] cost per point.
+    dict: 'collide_costmap' bool [Nv, Nw], 'clearance' float32 [C], 'violation'
+    float32 [C] (m/s x s), 'approach' bool [C], 'd2_end' float32 [C, m], 'neg'
+    float32 [m], 'rel_near' float32 [m, 2], 'x_end', 'y_end' float32 [Nv, Nw],
+    'hc', 'hs' float32 [Nw].
   """
-  n_rows, n_cols = cost.shape
-  o = jnp.reshape(origin, (1,) * (xy.ndim - 1) + (2,))
-  ij = jnp.floor((xy - o) / res).astype(jnp.int32)
-  inside = (ij[..., 0] >= 0) & (ij[..., 0] < n_cols) & (ij[..., 1] >= 0) & (ij[..., 1] < n_rows)
-  v = cost[jnp.clip(ij[..., 1], 0, n_rows - 1), jnp.clip(ij[..., 0], 0, n_cols - 1)].astype(jnp.int32)
-  return jnp.where(inside, v, constants.NO_INFORMATION)
+  p = config.planner
+  t_steps = p.num_rollout_steps
+  tab = ramp_tables(pose, cmd, speeds, yaw_rates, config)
+  v = tab["v"]
+  vdt = v[:, 1:] * p.rollout_dt                                           # [Nv, T]
+  interval_v = jnp.maximum(jnp.abs(v[:, 1:]), jnp.abs(v[:, :-1]))        # [Nv, T]
+  near = _nearest_others(pose, others, others_valid, config)
+  m = near["neg"].shape[0]
+  m_origin, m_res = speed_mask.origin[0], speed_mask.resolution[0]
+  here = lut_at(lut, origin, res, pose[0], pose[1])
+  rules = (jnp.uint16(LUT_LETHAL)
+           | jnp.where((here & LUT_HARD) == 0, jnp.uint16(LUT_HARD), jnp.uint16(0))
+           | jnp.where(((here & (LUT_INSCRIBED | LUT_LETHAL)) == 0) | p.inscribed_is_collision,
+                       jnp.uint16(LUT_INSCRIBED), jnp.uint16(0)))
+  cap_prev = jnp.minimum(speed_cap_xy(speed_cap, m_origin, m_res, pose[0], pose[1]), limit_now)
+  x, y = pose[0], pose[1]
+  seen = top = jnp.uint16(0)
+  excess = jnp.float32(0.0)
+  d2_min = [jnp.float32(jnp.inf)] * m
+  xs, ys = [], []
+  for t in range(t_steps):
+    step_x = vdt[:, None, t] * tab["mc"][t][None, :]                      # [Nv, Nw]
+    step_y = vdt[:, None, t] * tab["ms"][t][None, :]
+    x, y = x + step_x, y + step_y
+    mx, my = x - 0.5 * step_x, y - 0.5 * step_y
+    code_mid, code_end = lut_at(lut, origin, res, mx, my), lut_at(lut, origin, res, x, y)
+    seen = seen | code_mid | code_end
+    top = jnp.maximum(top, jnp.maximum(code_mid, code_end))
+    cap_end = speed_cap_xy(speed_cap, m_origin, m_res, x, y)
+    cap = jnp.minimum(jnp.minimum(cap_end, cap_prev), speed_cap_xy(speed_cap, m_origin, m_res, mx, my))
+    excess = excess + jnp.maximum(interval_v[:, None, t] - cap, 0.0)
+    cap_prev = cap_end
+    if t % 2 == (t_steps - 1) % 2:                                        # every other point, ending at T
+      dx = [x - near["x"][j] for j in range(m)]
+      dy = [y - near["y"][j] for j in range(m)]
+      d2 = [a * a + b * b for a, b in zip(dx, dy)]
+      d2_min = [jnp.minimum(a, b) for a, b in zip(d2_min, d2)]
+    if full:
+      xs.append(x), ys.append(y)
+  c = x.shape[0] * x.shape[1]
+  out = {"collide_costmap": (seen & rules) != 0,
+         "clearance": (top >> LUT_CLEARANCE_SHIFT).astype(jnp.int32).reshape(-1) / 252.0,
+         "violation": excess.reshape(c) * p.rollout_dt,
+         "approach": _approach(jnp.stack([a.reshape(c) for a in d2_min], 1), near["neg"], config),
+         "d2_end": jnp.stack([a.reshape(c) for a in d2], 1),
+         "neg": near["neg"], "rel_near": near["rel"], "x_end": x, "y_end": y, "hc": tab["hc"], "hs": tab["hs"]}
+  if full:
+    out["x"], out["y"] = jnp.stack(xs, -1), jnp.stack(ys, -1)
+  return out
 
 
-def speed_cap_at(speed_cap: jax.Array, mask_origin: jax.Array, mask_res: jax.Array,
-                 xy: jax.Array) -> jax.Array:
-  """Speed-mask limit in m/s at points xy [..., 2] (+inf off the mask or where there is none).
+def speed_cap_xy(speed_cap: jax.Array, mask_origin: jax.Array, mask_res: jax.Array, x: jax.Array,
+                 y: jax.Array) -> jax.Array:
+  """Speed-mask limit in m/s at points (+inf off the mask or where there is none).
 
   `speed_cap` holds `speed_limit_at_one`'s limit of every mask cell (see
   WorldParams), so this is one float floor and a gather per point. A point
   within float rounding of a cell edge may read the neighbouring cell; the
   interval rule (both ends of every rollout interval) makes that harmless.
-
-  Args:
-    speed_cap: float32 [Hs, Ws] m/s per speed-mask cell (+inf none).
-    mask_origin: float32 [2] (m); mask_res: float32 [] metres per cell.
-    xy: float32 [..., 2] points (m).
-
-  Returns:
-    float32 [...] m/s cap per point.
-  """
-  return speed_cap_xy(speed_cap, mask_origin, mask_res, xy[..., 0], xy[..., 1])
-
-
-def speed_cap_xy(speed_cap: jax.Array, mask_origin: jax.Array, mask_res: jax.Array, x: jax.Array,
-                 y: jax.Array) -> jax.Array:
-  """`speed_cap_at` with the coordinates as two arrays.
 
   Args:
     speed_cap: float32 [Hs, Ws] m/s per speed-mask cell (+inf none).
@@ -356,7 +387,7 @@ def lookup_table(cost: jax.Array, hard: jax.Array | None = None) -> jax.Array:
 
 
 def lut_at(lut: jax.Array, origin: jax.Array, res: jax.Array, x: jax.Array, y: jax.Array) -> jax.Array:
-  """Lookup-table codes at points; LUT_OUTSIDE outside the window (like `local_cost_at`'s 255).
+  """Lookup-table codes at points; LUT_OUTSIDE outside the window (unknown, 255).
 
   Args:
     lut: uint16 [N, N] `lookup_table` of a local costmap.
@@ -500,27 +531,40 @@ def evaluate_lut(pose, cmd, goal, limit_now, recovering, lut, origin, res, other
   nv, nw = speeds_np.shape[0], yaw_rates_np.shape[0]
   c = nv * nw
   targets = jnp.asarray(candidates(config, extra_speeds))
-  with jax.named_scope("rollout"):
-    ro = rollout_grid(pose, cmd, jnp.asarray(speeds_np), jnp.asarray(yaw_rates_np), config)
-  x, y, mx, my, v = ro["x"], ro["y"], ro["mx"], ro["my"], ro["v"]      # [Nv, Nw, T] x4, [Nv, T+1]
+  speeds, yaw_rates = jnp.asarray(speeds_np), jnp.asarray(yaw_rates_np)
+  mode = rollout_mode()
+  if mode == "fused":
+    t = one_pass_terms(lut, origin, res, pose, cmd, speeds, yaw_rates, speed_cap, speed_mask, limit_now,
+                       others, others_valid, config, full=full)
+    collide, clearance, violation = t["collide_costmap"], t["clearance"], t["violation"]
+    approach, d2_end, neg, rel_near = t["approach"], t["d2_end"], t["neg"], t["rel_near"]
+    x_end, y_end, hc, hs = t["x_end"], t["y_end"], t["hc"], t["hs"]
+    x, y = t.get("x"), t.get("y")
+  else:
+    with jax.named_scope("rollout"):
+      ro = rollout_grid(pose, cmd, speeds, yaw_rates, config, mode=mode)
+    x, y, mx, my, v = ro["x"], ro["y"], ro["mx"], ro["my"], ro["v"]      # [Nv, Nw, T] x4, [Nv, T+1]
+    with jax.named_scope("costmap_rules"):
+      collide, clearance = _costmap_rules(lut, origin, res, pose, x, y, mx, my,
+                                          inscribed_is_collision=p.inscribed_is_collision)
+    with jax.named_scope("monitor"):
+      near = _nearest_others(pose, others, others_valid, config)
+      approach, d2_end = _monitor(pose, near, x, y, config)
+      neg, rel_near = near["neg"], near["rel"]
+    with jax.named_scope("speed_lookahead"):
+      violation = _speed_lookahead(speed_cap, speed_mask, pose, limit_now, x, y, mx, my, v, config)
+    x_end, y_end, hc, hs = x[..., -1], y[..., -1], ro["hc"], ro["hs"]
 
   def flat(a):  # [Nv, Nw, ...] -> [C, ...], candidate i * Nw + j
     return a.reshape((c,) + a.shape[2:])
 
-  with jax.named_scope("costmap_rules"):
-    collide, clearance = _costmap_rules(lut, origin, res, pose, x, y, mx, my,
-                                        inscribed_is_collision=p.inscribed_is_collision)
-  with jax.named_scope("monitor"):
-    approach, d2_end, neg, rel_near = _monitor(pose, others, others_valid, x, y, config)
   collide = flat(collide) | approach
-  with jax.named_scope("speed_lookahead"):
-    violation = _speed_lookahead(speed_cap, speed_mask, pose, limit_now, x, y, mx, my, v, config)
   with jax.named_scope("navigation"):
-    end = jnp.stack([flat(x[..., -1]), flat(y[..., -1])], axis=1)             # [C, 2]
+    end = jnp.stack([flat(x_end), flat(y_end)], axis=1)                       # [C, 2]
     start_val = navigation.nav_value(nav, goal, pose[:2])
     end_val, desired = jax.vmap(lambda q: navigation.value_and_direction(nav, goal, q))(end)
-  head = jnp.stack([jnp.broadcast_to(ro["hc"], (nv, nw)).reshape(c),
-                    jnp.broadcast_to(ro["hs"], (nv, nw)).reshape(c)], axis=1)   # [C, 2]
+  head = jnp.stack([jnp.broadcast_to(hc, (nv, nw)).reshape(c),
+                    jnp.broadcast_to(hs, (nv, nw)).reshape(c)], axis=1)   # [C, 2]
 
   with jax.named_scope("score"):
     reach = r.max_speed * p.horizon
@@ -580,34 +624,51 @@ def _costmap_rules(lut, origin, res, pose, x, y, mx, my, *, inscribed_is_collisi
   return (seen & rules) != 0, (top >> LUT_CLEARANCE_SHIFT).astype(jnp.int32).reshape(-1) / 252.0
 
 
-def _monitor(pose, others, others_valid, x, y, config: FleetConfig):
-  """Collision monitor against the nearest other robots' current positions.
+def _nearest_others(pose, others, others_valid, config: FleetConfig) -> dict:
+  """The collision monitor's robots: the nearest `_MONITORED` others and their distances now.
+
+  Returns:
+    dict: 'neg' float32 [m] minus the squared distances now (-inf where fewer
+    than m others), 'rel' float32 [m, 2] their positions relative to the robot,
+    'x', 'y' float32 [m] their positions.
+  """
+  rel_now = others - pose[None, :2]
+  d2_now = jnp.where(others_valid, jnp.sum(rel_now * rel_now, axis=-1), jnp.inf)   # [K]
+  m = min(_MONITORED, others.shape[0])
+  neg, near = jax.lax.top_k(-d2_now, m)
+  return {"neg": neg, "rel": rel_now[near], "x": others[near, 0], "y": others[near, 1]}
+
+
+def _monitor(pose, near: dict, x, y, config: FleetConfig):
+  """Collision monitor against the nearest other robots' current positions (`_nearest_others`).
 
   Squared distances at every other rollout point (at most 0.1 m apart at 0.5 m/s),
   ending at the last one.
 
   Returns:
     (approach bool [C]: the candidate comes too close to one of them; d2_end float32
-    [C, m] squared distance of the last point to each; neg float32 [m] minus the
-    squared distances now (-inf where fewer than m others); rel_near float32 [m, 2]).
+    [C, m] squared distance of the last point to each).
   """
-  p, r = config.planner, config.robot
   c, t = x.shape[0] * x.shape[1], x.shape[-1]
-  safe2 = (2.0 * r.radius + p.monitor_margin) ** 2
-  rel_now = others - pose[None, :2]
-  d2_now = jnp.where(others_valid, jnp.sum(rel_now * rel_now, axis=-1), jnp.inf)   # [K]
-  m = min(_MONITORED, others.shape[0])
-  neg, near = jax.lax.top_k(-d2_now, m)
+  m = near["neg"].shape[0]
   sel = slice(1 - t % 2, t, 2)                                   # points 2 - T % 2, ..., T (ends at T)
-  ox, oy = others[near, 0], others[near, 1]                       # [m]
+  ox, oy = near["x"], near["y"]                                   # [m]
   # [m, Nv, Nw, ~T/2]: the points innermost, so the squares and the min run along contiguous memory.
   dx = x[None, ..., sel] - ox[:, None, None, None]
   dy = y[None, ..., sel] - oy[:, None, None, None]
   d2_path = dx * dx + dy * dy
   d2_min = jnp.min(d2_path, axis=-1).reshape(m, c).T             # [C, m]
   d2_last = d2_path[..., -1].reshape(m, c).T
+  return _approach(d2_min, near["neg"], config), d2_last
+
+
+def _approach(d2_min, neg, config: FleetConfig):
+  """bool [C]: a candidate's path comes closer than 2 radius + margin to a monitored robot it is not
+  already closer to (moving away is always allowed). d2_min float32 [C, m], neg float32 [m]."""
+  p, r = config.planner, config.robot
+  safe2 = (2.0 * r.radius + p.monitor_margin) ** 2
   approach = jnp.isfinite(neg)[None, :] & (d2_min < safe2) & (d2_min < -neg[None, :] - 1e-4)
-  return jnp.any(approach, axis=1), d2_last, neg, rel_now[near]
+  return jnp.any(approach, axis=1)
 
 
 def _speed_lookahead(speed_cap, speed_mask, pose, limit_now, x, y, mx, my, v, config: FleetConfig):

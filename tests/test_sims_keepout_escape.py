@@ -23,6 +23,7 @@ from sims.config import FleetConfig, PlannerConfig
 from sims.env import FleetEnv
 from sims.metrics import summarize
 from reference import nav2 as reference
+from reference import planner as ref_planner
 
 CFG = FleetConfig(robots_per_world=6, keepout_escape="footprint", robots_in_keepout=3, num_stations=8,
                   planner=PlannerConfig(inscribed_is_collision=True))
@@ -138,7 +139,7 @@ def test_nav2_centre_test_traps_where_the_footprint_test_releases(escape_run):
     _, info = jax.vmap(one, in_axes=(0, 0, 0, None, None, 0, 0, 0, 0, None, 0))(
         poses, cmd, steer, jnp.inf, False, local.cost, hard, local.origin, local.resolution, poses[:, :2],
         ~jnp.eye(k, dtype=bool))
-    here = jax.vmap(planner.local_cost_at)(local.cost, local.origin, local.resolution, poses[:, :2])
+    here = jax.vmap(ref_planner.local_cost_at)(local.cost, local.origin, local.resolution, poses[:, :2])
     return info["stopped"], here
 
   checked = 0

@@ -286,23 +286,27 @@ def test_planner_stops_rather_than_enter_keepout(tiny):
   assert poses[:, 0].max() < 5.0
 
 
-def test_rollout_matches_reference_unicycle():
+@pytest.mark.parametrize("mode", ["cumsum", "chain"])
+def test_rollout_grid_matches_a_unicycle_in_doubles(mode):
   cfg = FleetConfig()
-  targets = jnp.asarray(planner.candidates(cfg))
+  speeds, rates = planner.target_axes(cfg)
+  targets = planner.candidates(cfg)
+  nw = len(rates)
   pose = jnp.asarray([1.0, -2.0, 0.7])
   cmd = jnp.asarray([0.3, -0.5])
-  xy, head, v = planner.rollout(pose, cmd, targets, cfg)
+  g = planner.rollout_grid(pose, cmd, jnp.asarray(speeds), jnp.asarray(rates), cfg, mode=mode)
   r, dt = cfg.robot, cfg.planner.rollout_dt
   for c in (0, 7, 20, len(targets) - 1):
+    i, j = divmod(c, nw)
     x, y, th, vv, ww = 1.0, -2.0, 0.7, 0.3, -0.5
     for t in range(cfg.planner.num_rollout_steps):
       vv += np.clip(float(targets[c, 0]) - vv, -r.max_accel * dt, r.max_accel * dt)
       ww += np.clip(float(targets[c, 1]) - ww, -r.max_yaw_accel * dt, r.max_yaw_accel * dt)
       mid = th + 0.5 * ww * dt
       x, y, th = x + vv * math.cos(mid) * dt, y + vv * math.sin(mid) * dt, th + ww * dt
-      np.testing.assert_allclose(np.asarray(xy[c, t + 1]), [x, y], atol=2e-5)
-      assert float(v[c, t + 1]) == pytest.approx(vv, abs=1e-6)
-    np.testing.assert_allclose(np.asarray(head[c]), [math.cos(th), math.sin(th)], atol=2e-5)
+      np.testing.assert_allclose([float(g["x"][i, j, t]), float(g["y"][i, j, t])], [x, y], atol=2e-5)
+      assert float(g["v"][i, t + 1]) == pytest.approx(vv, abs=1e-6)
+    np.testing.assert_allclose([float(g["hc"][j]), float(g["hs"][j])], [math.cos(th), math.sin(th)], atol=2e-5)
 
 
 # ----------------------------------------------------------------------------- metric kernels
