@@ -1,8 +1,12 @@
-"""The Nav2-style C++ keepout peer (benchmarks/nav2_keepout_peer.cpp): build, call, check.
+"""The C++ keepout peers: build, call, check.
 
-The harness compiles the peer at benchmark time with `g++ -O2` (or `$CXX`), loads it
-with ctypes and times it on the same inputs as the JAX paths, on one core like Nav2's
-costmap thread. Where no compiler exists the peer is skipped with the reason.
+Two peers with one C signature: the Nav2-style line-by-line copy of
+KeepoutFilter::process (benchmarks/nav2_keepout_peer.cpp, `SOURCE`) and a lean cell
+loop without its per-call window arithmetic (benchmarks/lean_keepout_peer.cpp,
+`LEAN_SOURCE`). The harness compiles a peer at benchmark time with `g++ -O2` (or
+`$CXX`), loads it with ctypes and times it on the same inputs as the JAX paths, on one
+core like Nav2's costmap thread. Where no compiler exists the peer is skipped with the
+reason.
 
 Before a peer figure is timed its integers are checked: equal to `reference/nav2.py`
 (float64, the same arithmetic) on the first robot, and equal to the JAX output on every
@@ -28,53 +32,53 @@ import numpy as np
 from reference import nav2 as nav2_reference
 
 SOURCE = pathlib.Path(__file__).with_name("nav2_keepout_peer.cpp")
+LEAN_SOURCE = pathlib.Path(__file__).with_name("lean_keepout_peer.cpp")
+_SYMBOLS = {SOURCE.name: "nav2_keepout_batch", LEAN_SOURCE.name: "lean_keepout_batch"}
 FLAGS = ("-O2", "-ffp-contract=off", "-shared", "-fPIC")
 SE2_EDGE_BAND_M = 1e-4       # float32 vs float64 rotation of centres up to ~100 m: ~1e-5 m
 
-_LIB: tuple | None = None
+_LIBS: dict = {}
 
 
-def build():
-  """Compiles and loads the peer once per process.
+def build(source: pathlib.Path = SOURCE):
+  """Compiles and loads a peer (`SOURCE` or `LEAN_SOURCE`) once per process.
 
   Returns:
     (ctypes function or None, description): the description names the compiler and
     flags, or says why the peer was skipped.
   """
-  global _LIB
-  if _LIB is not None:
-    return _LIB
+  if source not in _LIBS:
+    _LIBS[source] = _build(source)
+  return _LIBS[source]
+
+
+def _build(source: pathlib.Path):
   cxx = os.environ.get("CXX") or shutil.which("g++")
   if not cxx:
-    _LIB = (None, "no C++ compiler (g++ not on PATH and CXX unset)")
-    return _LIB
-  if not SOURCE.exists():
-    _LIB = (None, f"peer source {SOURCE} not found")
-    return _LIB
+    return None, "no C++ compiler (g++ not on PATH and CXX unset)"
+  if not source.exists():
+    return None, f"peer source {source} not found"
   # One build per source, compiler and flags, kept in the temp folder between runs.
-  key = hashlib.sha256(SOURCE.read_bytes() + " ".join([cxx, *FLAGS]).encode()).hexdigest()[:16]
-  out = pathlib.Path(tempfile.gettempdir()) / f"jaxfilters_nav2_peer_{key}.so"
+  key = hashlib.sha256(source.read_bytes() + " ".join([cxx, *FLAGS]).encode()).hexdigest()[:16]
+  out = pathlib.Path(tempfile.gettempdir()) / f"jaxfilters_{source.stem}_{key}.so"
   part = out.with_suffix(f".{os.getpid()}.so")
-  cmd = [cxx, *FLAGS, "-o", str(part), str(SOURCE)]
+  cmd = [cxx, *FLAGS, "-o", str(part), str(source)]
   if not out.exists():
     try:
       proc = subprocess.run(cmd, capture_output=True, text=True, timeout=120)
     except (OSError, subprocess.TimeoutExpired) as e:
-      _LIB = (None, f"{' '.join(cmd)} failed: {type(e).__name__}: {e}")
-      return _LIB
+      return None, f"{' '.join(cmd)} failed: {type(e).__name__}: {e}"
     if proc.returncode != 0:
-      _LIB = (None, f"{' '.join(cmd)} exited {proc.returncode}: {proc.stderr.strip()[:300]}")
-      return _LIB
+      return None, f"{' '.join(cmd)} exited {proc.returncode}: {proc.stderr.strip()[:300]}"
     os.replace(part, out)                       # atomic: a concurrent run never loads half a file
   lib = ctypes.CDLL(str(out))
-  fn = lib.nav2_keepout_batch
+  fn = getattr(lib, _SYMBOLS[source.name])
   fn.restype = ctypes.c_int
   p = ctypes.c_void_p
   fn.argtypes = [ctypes.c_int, ctypes.c_int, ctypes.c_int, p, p, p, p, ctypes.c_int, ctypes.c_int, p, p, p,
                  p, p, p, ctypes.c_int, ctypes.c_int, p]
   version = subprocess.run([cxx, "--version"], capture_output=True, text=True).stdout.splitlines()[:1]
-  _LIB = (fn, f"{' '.join(version) or cxx} {' '.join(FLAGS[:2])}, ctypes, 1 thread")
-  return _LIB
+  return fn, f"{source.name}, {' '.join(version) or cxx} {' '.join(FLAGS[:2])}, ctypes, 1 thread"
 
 
 def host_inputs(cm, mask, window=None, transform=None, num_robots=None):

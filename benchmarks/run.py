@@ -9,8 +9,10 @@ Every figure is a dict with its parameters (B, H, W, mask size, dtype),
 goes to stderr either way.
 
 Every keepout figure also times the Nav2-style C++ peer (benchmarks/nav2_keepout_peer.cpp,
-built here with g++ -O2, one core) on the same inputs after checking its integers, and
-reports `speedup_vs_cpp`; without a compiler `cpp_peer` says why it was skipped.
+built here with g++ -O2, one core) and the lean C++ loop (benchmarks/lean_keepout_peer.cpp)
+on the same inputs after checking their integers, interleaved with the JAX runs, and
+reports `speedup_vs_cpp` and `speedup_vs_lean` (ratios of medians of >= 5 runs each);
+without a compiler `cpp_peer` / `cpp_lean_peer` say why they were skipped.
 """
 
 from __future__ import annotations
@@ -168,13 +170,23 @@ def bench_keepout(kind, sz, b, config=None):
 
   outs = []
   peer = PeerTimer(sets, min(b, sz["cpp_keepout_b"]))
-  c, s, _ = measure(fn, sets, sz["repeats"], outputs=outs, between=peer.block,
-                    after_warmup=lambda o: peer.prepare([x[0] for x in o]))
+  lean = PeerTimer(sets, min(b, sz["cpp_keepout_b"]), source=nav2_peer.LEAN_SOURCE)
+
+  def between(n):
+    peer.block(n)
+    lean.block(n)
+
+  def prepare(o):
+    peer.prepare([x[0] for x in o])
+    lean.prepare([x[0] for x in o])
+
+  c, s, _ = measure(fn, sets, sz["repeats"], outputs=outs, between=between, after_warmup=prepare)
   cells = b * hw * hw
   fig = figure(kind, dict(B=b, H=hw, W=hw, mask=[n, n], mask_res=mask_res, costmap_res=RES,
                           dtype="uint8 cost, int8 mask", transform=transform, kernel=config.kernel),
                c, s, cells, "cells/s", bytes_per_cell=3)
   fig["cpp_peer"] = peer.result()
+  fig["cpp_lean_peer"] = lean.result()
   try:   # which fast-path branches these inputs take (counts over the first 64 robots)
     from benchmarks.keepout_paths import path_report  # noqa: PLC0415
     cm, mask, tf = sets[0]
@@ -204,8 +216,8 @@ class PeerTimer:
   `cpp_peer` entry.
   """
 
-  def __init__(self, sets, b, label="JAX"):
-    self.fn, self.desc = nav2_peer.build()
+  def __init__(self, sets, b, label="JAX", source=nav2_peer.SOURCE):
+    self.fn, self.desc = nav2_peer.build(source)
     self.b, self.label, self.times, self.checks = b, label, [], []
     if self.fn is not None:
       self.inputs = [nav2_peer.host_inputs(cm, mask, transform=tf, num_robots=b) for cm, mask, tf in sets]
@@ -483,6 +495,9 @@ def table(report) -> str:
       note += f"  x{r['speedup_vs_cpp']:.3g} vs C++ peer ({_fmt(peer['throughput'], 'cells/s')}, 1 core)"
     elif peer:
       note += f"  C++ peer skipped: {peer.get('skipped', '')}"
+    lean = r.get("cpp_lean_peer")
+    if lean and "throughput" in lean:
+      note += f"  x{r['speedup_vs_lean']:.3g} vs lean C++ loop ({_fmt(lean['throughput'], 'cells/s')})"
     lines.append(f"{name:22s} {b!s:>7s} {r['compile_s']:10.3f} {r['steady_s']:10.5f} "
                  f"{_fmt(r['throughput'], r['unit']):>18s}  {note}")
   return "\n".join(lines)
@@ -554,6 +569,9 @@ def main(argv=None) -> int:
     peer = (r or {}).get("cpp_peer", {})
     if "throughput" in (r or {}) and "throughput" in peer:
       r["speedup_vs_cpp"] = r["throughput"] / peer["throughput"]
+    lean = (r or {}).get("cpp_lean_peer", {})
+    if "throughput" in (r or {}) and "throughput" in lean:
+      r["speedup_vs_lean"] = r["throughput"] / lean["throughput"]
   base = results.get("baseline_speed", {}).get("throughput")
   if base and "throughput" in results.get("speed", {}):
     results["speed"]["speedup_vs_numpy"] = results["speed"]["throughput"] / base

@@ -119,6 +119,9 @@ def harness_rows(run: dict, seen: set) -> list[list[str]]:
     if "speedup_vs_cpp" in r:
       base.append(f"C++ peer {rate(peer, 'cells/s')} ({speedup(r['speedup_vs_cpp'])})" if peer
                   else f"C++ peer {speedup(r['speedup_vs_cpp'])}")
+    lean = r.get("cpp_lean_peer", {}).get("throughput")
+    if "speedup_vs_lean" in r:
+      base.append(f"lean C++ loop {rate(lean, 'cells/s')} ({speedup(r['speedup_vs_lean'])})")
     if "speedup_vs_numpy" in r:
       base.append(f"NumPy loop {speedup(r['speedup_vs_numpy'])}")
     if name == "speed" and "baseline_speed" in res:
