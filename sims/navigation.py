@@ -298,3 +298,61 @@ def value_and_direction(field: NavField, goal: jax.Array, xy: jax.Array) -> tupl
   grad = jnp.where(v0 < UNREACHABLE, grad, 0.0)
   n = jnp.sqrt(jnp.sum(grad * grad))
   return v0, jnp.where(n > 1e-9, grad / jnp.where(n > 1e-9, n, 1.0), 0.0)
+
+
+def value_and_direction_xy(field: NavField, goal: jax.Array, x: jax.Array, y: jax.Array
+                           ) -> tuple[jax.Array, jax.Array, jax.Array]:
+  """`value_and_direction` at many points of one goal, elementwise (no stacked arrays).
+
+  The same five points, 20 bilinear corners and float32 arithmetic as
+  `value_and_direction`, written as separate gathers and elementwise operations
+  on arrays of x's shape, so a GPU computes everything inside the kernel that
+  produced x and y (the one-pass planner, `planner.one_pass_terms`) instead of
+  writing [corners, points, ...] arrays out. Sums run in a fixed order (results
+  agree with `value_and_direction` to float rounding; tests/test_fleet_perf.py).
+
+  Args:
+    field: the shared NavField. goal: int32 [] station index.
+    x, y: float32 [...] points (m), the same shape.
+
+  Returns:
+    (value float32 [...] as `nav_value`, direction unit vector components dx, dy float32 [...]).
+  """
+  s, hn, wn = field.dist.shape
+  if s * hn * wn >= 2 ** 31:
+    raise ValueError(f"value_and_direction_xy indexes the field as one int32 array; got {s} x {hn} x {wn} "
+                     f"cells (must be < 2**31)")
+  h = field.resolution
+  dist = field.dist.reshape(-1)
+
+  def value(px, py):
+    gx = (px - field.origin[0]) / field.resolution - 0.5
+    gy = (py - field.origin[1]) / field.resolution - 0.5
+    fx0, fy0 = jnp.floor(gx), jnp.floor(gy)
+    fx, fy = gx - fx0, gy - fy0
+    cx0, cy0 = fx0.astype(jnp.int32), fy0.astype(jnp.int32)
+    num = total = None
+    for dy in (0, 1):
+      for dx in (0, 1):
+        cx, cy = cx0 + dx, cy0 + dy
+        inside = (cx >= 0) & (cx < wn) & (cy >= 0) & (cy < hn)
+        v = dist[(goal * hn + jnp.clip(cy, 0, hn - 1)) * wn + jnp.clip(cx, 0, wn - 1)]
+        ok = inside & jnp.isfinite(v)
+        wgt = jnp.where(ok, (fx if dx else 1.0 - fx) * (fy if dy else 1.0 - fy) + 1e-6, 0.0)
+        term = jnp.where(ok, v, 0.0) * wgt
+        num, total = (term, wgt) if num is None else (num + term, total + wgt)
+    return jnp.where(total > 0, num / jnp.where(total > 0, total, 1.0), UNREACHABLE)
+
+  v0 = value(x, y)
+
+  def slope(vp, vm):
+    okp, okm = vp < UNREACHABLE, vm < UNREACHABLE
+    n = okp.astype(_F32) + okm.astype(_F32)
+    total = jnp.where(okp, vp - v0, 0.0) + jnp.where(okm, v0 - vm, 0.0)
+    return jnp.where(n > 0, total / jnp.maximum(n, 1.0), 0.0)
+
+  gx = jnp.where(v0 < UNREACHABLE, -slope(value(x + h, y), value(x - h, y)), 0.0)
+  gy = jnp.where(v0 < UNREACHABLE, -slope(value(x, y + h), value(x, y - h)), 0.0)
+  n = jnp.sqrt(gx * gx + gy * gy)
+  safe = jnp.where(n > 1e-9, n, 1.0)
+  return v0, jnp.where(n > 1e-9, gx / safe, 0.0), jnp.where(n > 1e-9, gy / safe, 0.0)

@@ -560,16 +560,20 @@ def evaluate_lut(pose, cmd, goal, limit_now, recovering, lut, origin, res, other
 
   collide = flat(collide) | approach
   with jax.named_scope("navigation"):
-    end = jnp.stack([flat(x_end), flat(y_end)], axis=1)                       # [C, 2]
     start_val = navigation.nav_value(nav, goal, pose[:2])
-    end_val, desired = jax.vmap(lambda q: navigation.value_and_direction(nav, goal, q))(end)
-  head = jnp.stack([jnp.broadcast_to(hc, (nv, nw)).reshape(c),
-                    jnp.broadcast_to(hs, (nv, nw)).reshape(c)], axis=1)   # [C, 2]
+    head_c, head_s = jnp.broadcast_to(hc, (nv, nw)).reshape(c), jnp.broadcast_to(hs, (nv, nw)).reshape(c)
+    if mode == "fused":   # elementwise: no [C, 2] or stencil arrays between the GPU's kernels
+      end_val, dx, dy = navigation.value_and_direction_xy(nav, goal, flat(x_end), flat(y_end))
+      along = head_c * dx + head_s * dy
+    else:
+      end = jnp.stack([flat(x_end), flat(y_end)], axis=1)                     # [C, 2]
+      end_val, desired = jax.vmap(lambda q: navigation.value_and_direction(nav, goal, q))(end)
+      along = jnp.sum(jnp.stack([head_c, head_s], axis=1) * desired, axis=1)
 
   with jax.named_scope("score"):
     reach = r.max_speed * p.horizon
     progress = (end_val - start_val) / reach
-    heading = 0.5 * (1.0 - jnp.sum(head * desired, axis=1))
+    heading = 0.5 * (1.0 - along)
     speed_term = 1.0 - targets[:, 0] / r.max_speed
     # Right-hand traffic: with another robot ahead (within 2 m, +-45 deg), prefer turning right,
     # so two robots meeting head-on both veer right instead of blocking each other.

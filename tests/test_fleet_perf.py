@@ -285,6 +285,10 @@ def test_value_and_direction_matches_nav_value_and_descent_direction(env):
   np.testing.assert_allclose(np.asarray(val), np.asarray(val_r), rtol=1e-6)   # XLA may contract a*b+c (FMA)
   np.testing.assert_allclose(np.asarray(d), np.asarray(d_r), atol=1e-4)
   assert (np.asarray(val) == navigation.UNREACHABLE).any() and (np.asarray(val) < 50).any()
+  # The elementwise form of the one-pass planner.
+  val_e, dx, dy = jax.jit(jax.vmap(lambda g, q: navigation.value_and_direction_xy(nav, g, q[0], q[1])))(goal, xy)
+  np.testing.assert_allclose(np.asarray(val_e), np.asarray(val_r), rtol=1e-6)
+  np.testing.assert_allclose(np.stack([dx, dy], 1), np.asarray(d_r), atol=1e-4)
 
 
 def test_planner_stops_a_robot_with_a_non_finite_pose(env):
