@@ -28,8 +28,9 @@ if [ "${TESTS:-1}" = 1 ]; then
 echo "== exact-arithmetic tests on the GPU (FMA contraction) -> $OUT/gpu_tests.log"
 # test_keepout_paths: the fast paths' error bounds (2-ulp division, FMA, flush-to-zero) on this device;
 # test_trust: costmaps with double (float64) geometry beside float32 masks.
-timeout "${TEST_TIMEOUT:-300}" python3 -m pytest -q tests/test_geometry.py tests/test_fast_paths.py \
-  tests/test_keepout_paths.py tests/test_trust.py -k "not eager_speed_filter_compiles_once" \
+# TEST_FILES overrides the list (e.g. the files a change touched, to fit the call's time limit).
+timeout "${TEST_TIMEOUT:-300}" python3 -m pytest -q ${TEST_FILES:-tests/test_geometry.py tests/test_fast_paths.py \
+  tests/test_keepout_paths.py tests/test_trust.py} -k "not eager_speed_filter_compiles_once" \
   -p no:cacheprovider > "$OUT/gpu_tests.log" 2>&1
 echo "pytest rc=$? ; tail:"; tail -n 3 "$OUT/gpu_tests.log"
 fi

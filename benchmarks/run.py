@@ -37,6 +37,7 @@ from benchmarks import nav2_peer
 
 RES = 0.05
 NAMES = ("bandwidth", "keepout_aligned", "keepout_aligned_pallas", "keepout_other_res", "keepout_transform",
+         "keepout_transform_xla",
          "speed", "binary", "zone", "inflation", "pipeline", "baseline_keepout", "baseline_speed", "fleet")
 
 
@@ -157,8 +158,8 @@ def random_poses(seed, b, span):
 def bench_keepout(kind, sz, b, config=None):
   hw, n = sz["hw"], sz["mask"]
   mask_res = {"keepout_aligned": RES, "keepout_aligned_pallas": RES, "keepout_other_res": 2 * RES,
-              "keepout_transform": RES}[kind]
-  transform = kind == "keepout_transform"
+              "keepout_transform": RES, "keepout_transform_xla": RES}[kind]
+  transform = kind.startswith("keepout_transform")
   sets = [keepout_inputs(s, b, hw, n, mask_res, transform) for s in range(2)]
   state = jf.KeepoutState.create(b)
   poses = jnp.zeros((b, 3), jnp.float32)
@@ -183,7 +184,8 @@ def bench_keepout(kind, sz, b, config=None):
   c, s, _ = measure(fn, sets, sz["repeats"], outputs=outs, between=between, after_warmup=prepare)
   cells = b * hw * hw
   fig = figure(kind, dict(B=b, H=hw, W=hw, mask=[n, n], mask_res=mask_res, costmap_res=RES,
-                          dtype="uint8 cost, int8 mask", transform=transform, kernel=config.kernel),
+                          dtype="uint8 cost, int8 mask", transform=transform, kernel=config.kernel,
+                          frame_kernel=config.frame_kernel),
                c, s, cells, "cells/s", bytes_per_cell=3)
   fig["cpp_peer"] = peer.result()
   fig["cpp_lean_peer"] = lean.result()
@@ -329,7 +331,14 @@ def bench_bandwidth(sz):
   # The roofline is the best copy rate measured in this call (a JAX elementwise loop
   # does not reach the card's copy rate; the device's own copy engine path does).
   fig["roofline_bytes_per_s"] = max(fig["throughput"], torch_bw or 0.0)
+  fig["roofline_label"] = roofline_label(fig)
   return fig
+
+
+def roofline_label(fig: dict) -> str:
+  """Which copy set a bandwidth figure's roofline: PyTorch's device-to-device copy or JAX's `x + 1`."""
+  torch_bw = fig.get("torch_copy_bytes_per_s")
+  return "PyTorch D2D copy" if torch_bw and torch_bw >= fig["throughput"] else "JAX x + 1 copy"
 
 
 def _torch_copy_bandwidth(n: int, repeats: int) -> float | None:
@@ -391,15 +400,15 @@ def bench_baseline_keepout(sz, b):
   peer = PeerTimer(cpu_sets, b, label="the NumPy loop")
   peer.prepare(numpy_out)
   times = []
-  n = max(sz["repeats"], 5)
-  for k in range(n):
+  runs = max(sz["repeats"], 5)
+  for k in range(runs):
     cost, origin, res, data, mo, mres = sets[k % 2]
     t = time.perf_counter()
     for r in range(b):
       numpy_keepout_one(cost[r], origin[r], res, data, mo, mres)
     times.append(time.perf_counter() - t)
-    if k + 1 in (n // 2, n):
-      peer.block(n // 2 if k + 1 == n // 2 else n - n // 2)
+    if k + 1 in (runs // 2, runs):
+      peer.block(runs // 2 if k + 1 == runs // 2 else runs - runs // 2)
   st = float(np.median(times))
   fig = figure("baseline_keepout", dict(B=b, H=hw, W=hw, mask=[n, n], impl="numpy per-robot loop, float64",
                                         dtype="uint8 cost, int8 mask"), 0.0, st, b * hw * hw, "cells/s")
@@ -529,6 +538,9 @@ def main(argv=None) -> int:
       "keepout_aligned_pallas": lambda: bench_keepout_pallas(sz, rb(sz["keepout_b"])),
       "keepout_other_res": lambda: bench_keepout("keepout_other_res", sz, rb(sz["keepout_b"])),
       "keepout_transform": lambda: bench_keepout("keepout_transform", sz, rb(sz["keepout_b"])),
+      # The other frame's XLA edge-table loop, beside the default (the Triton kernel on a GPU).
+      "keepout_transform_xla": lambda: bench_keepout("keepout_transform_xla", sz, rb(sz["keepout_b"]),
+                                                     config=jf.KeepoutConfig(frame_kernel="xla")),
       "speed": lambda: bench_point_filter("speed", sz, rb(sz["filter_b"])),
       "binary": lambda: bench_point_filter("binary", sz, rb(sz["filter_b"])),
       "zone": lambda: bench_point_filter("zone", sz, rb(sz["filter_b"])),
@@ -556,7 +568,8 @@ def main(argv=None) -> int:
 
   bw_fig = results.get("bandwidth", {})
   bw = bw_fig.get("roofline_bytes_per_s", bw_fig.get("throughput"))
-  for name in ("keepout_aligned", "keepout_aligned_pallas", "keepout_other_res", "keepout_transform", "pipeline"):
+  for name in ("keepout_aligned", "keepout_aligned_pallas", "keepout_other_res", "keepout_transform",
+               "keepout_transform_xla", "pipeline"):
     r = results.get(name)
     if r and "throughput" in r and bw and name != "pipeline":
       r["roofline_pct"] = 100.0 * r["throughput"] * 3 / bw
@@ -564,7 +577,7 @@ def main(argv=None) -> int:
     if r and "throughput" in r and base and name.startswith("keepout"):
       r["speedup_vs_numpy"] = r["throughput"] / base
   for name in ("keepout_aligned", "keepout_aligned_pallas", "keepout_other_res", "keepout_transform",
-               "baseline_keepout"):
+               "keepout_transform_xla", "baseline_keepout"):
     r = results.get(name)
     peer = (r or {}).get("cpp_peer", {})
     if "throughput" in (r or {}) and "throughput" in peer:

@@ -277,12 +277,16 @@ def test_filter_with_pallas_equals_float64_reference(config):
 def test_kernel_option_is_validated():
   with pytest.raises(ValueError, match=r"kernel must be one of \('auto', 'xla', 'pallas'\); got 'triton'"):
     ko.KeepoutConfig(kernel="triton")
+  with pytest.raises(ValueError, match=r"kernel must be one of \('auto', 'xla', 'pallas'\); got 'cuda'"):
+    ko.KeepoutConfig(frame_kernel="cuda")
   with pytest.raises(ValueError, match="pallas must be a keepout.pallas.PallasTuning; got dict"):
     ko.KeepoutConfig(pallas={"layout": "flat"})
   for kwargs, message in [(dict(layout="tiles"), r"layout must be one of \('flat', 'rows'\); got 'tiles'"),
                           (dict(block_cells=1000), r"block_cells must be a power of two in \[16, 65536\]; got 1000"),
                           (dict(block_cells=True), "block_cells must be a power of two"),
+                          (dict(frame_block_cells=100), r"frame_block_cells must be a power of two in \[16, 65536\]; got 100"),
                           (dict(num_warps=3), "num_warps must be one of 1, 2, 4, 8, 16, 32; got 3"),
+                          (dict(frame_num_warps=64), "frame_num_warps must be one of 1, 2, 4, 8, 16, 32; got 64"),
                           (dict(num_stages=0), r"num_stages must be an int in \[1, 8\]; got 0"),
                           (dict(in_place=1), "in_place must be a bool; got 1"),
                           (dict(interpret="yes"), "interpret must be a bool; got 'yes'")]:

@@ -450,6 +450,21 @@ def test_other_frame_kernels_equal_the_exact_path(n):
   assert (np.asarray(want[0].cost) != np.asarray(case[0].cost)).any()
 
 
+@pytest.mark.parametrize("n", range(3))
+def test_other_frame_pallas_kernel_equals_the_exact_path(n):
+  """`pallas.other_frame_write` (in the Pallas interpreter here; tuned small so a robot spans
+  several programs) on the same edge, one-ulp and random cases, plain and in escape mode."""
+  case, tf = _se2_cases()[n]
+  args = _impl_inputs(case, jnp.asarray(tf), lower_parts=True)
+  tuning = ko.PallasTuning(interpret=True, frame_block_cells=64)
+  for cfg in (PLAIN, ESCAPE):
+    want = process.filter_batch(*args, config=cfg, exact=True)
+    cost, st = _other_frame(*args, config=dataclasses.replace(cfg, frame_kernel="pallas", pallas=tuning),
+                            loop="vmap")
+    np.testing.assert_array_equal(np.asarray(cost), np.asarray(want[0].cost), err_msg=f"{cfg}")
+    np.testing.assert_array_equal(np.asarray(st.last_pose_lethal), np.asarray(want[1].last_pose_lethal))
+
+
 def test_other_frame_kernels_run_the_exact_path_where_edge_tables_are_untrusted():
   # A 2**-41 m mask (below the tables' range): the robots on it must run the exact path.
   rng = np.random.default_rng(3)
@@ -463,6 +478,8 @@ def test_other_frame_kernels_run_the_exact_path_where_edge_tables_are_untrusted(
   want = np.asarray(process.filter_batch(*args, config=PLAIN, exact=True)[0].cost)
   assert (want != np.asarray(case[0].cost)).any()
   np.testing.assert_array_equal(np.asarray(_other_frame(*args, config=PLAIN, loop="vmap")[0]), want)
+  pallas_cfg = ko.KeepoutConfig(frame_kernel="pallas", pallas=ko.PallasTuning(interpret=True))
+  np.testing.assert_array_equal(np.asarray(_other_frame(*args, config=pallas_cfg, loop="vmap")[0]), want)
 
 
 def _exact_vectors(cm, mask, idx, ok, win, en):

@@ -56,8 +56,12 @@ class KeepoutConfig:
       backend), "pallas" (the Triton kernel of `jaxfilters.keepout.pallas`, same
       integers; needs a GPU backend, or `pallas.interpret=True`, else
       `keepout_filter` raises) or "auto" (Pallas on a GPU backend, XLA
-      elsewhere). The gather and other-frame paths are XLA either way.
-    pallas: static `jaxfilters.keepout.pallas.PallasTuning` of the kernel (layout, block,
+      elsewhere). The gather path is XLA either way.
+    frame_kernel: what runs the vectorised other-frame (SE2) cells: "auto"
+      (default: the Triton kernel `pallas.other_frame_write` on a GPU backend,
+      the XLA edge-table loop elsewhere), "xla" or "pallas" (as `kernel`: a GPU
+      backend or `pallas.interpret=True`). The same integers either way.
+    pallas: static `jaxfilters.keepout.pallas.PallasTuning` of the kernels (layout, blocks,
       warps, interpreter).
     robot_in_zone: the escape mode's robot-in-zone test: "center" (Nav2: the
       robot centre's mask cell) or "footprint" (beyond Nav2, Nav2 issue #6505 / PR
@@ -79,6 +83,7 @@ class KeepoutConfig:
   lethal_override_cost: int = constants.MAX_NON_OBSTACLE
   aligned_fast_path: bool = True
   kernel: str = "xla"
+  frame_kernel: str = "auto"
   pallas: PallasTuning = PallasTuning()
   robot_in_zone: str = "center"
   footprint: tuple | None = None
@@ -96,6 +101,7 @@ class KeepoutConfig:
 
   def __post_init__(self):
     pallas.check_kernel(self.kernel)
+    pallas.check_kernel(self.frame_kernel)
     if not isinstance(self.pallas, PallasTuning):
       raise ValueError(f"pallas must be a keepout.pallas.PallasTuning; got {type(self.pallas).__name__}")
     if not isinstance(self.aligned_fast_path, (bool, np.bool_)):

@@ -15,7 +15,10 @@ the exact division:
   floor exactly from a per-mask table of edge thresholds (the smallest float32 at or
   above each mask-cell edge): an estimate good to one cell, two table reads and two
   float32 comparisons per axis, so no undecided cells, no reduction and no second
-  pass; four cells per uint32 word when W % 4 == 0. Robots whose mask geometry the
+  pass; four cells per uint32 word when W % 4 == 0 in XLA, or (`KeepoutConfig.frame_kernel`,
+  by default on a GPU) one Triton kernel (`pallas.other_frame_write`) that reads the
+  tables and the mask bytes per cell and writes nothing but the costmap.
+  Robots whose mask geometry the
   tables do not cover (`geometry.edge_thresholds`' `trusted`, never for a map file's
   values) run the exact per-cell path.
 """
@@ -26,6 +29,7 @@ import jax
 import jax.numpy as jnp
 
 from jaxfilters import geometry
+from jaxfilters.keepout import pallas
 from jaxfilters.keepout.common import (divisor_at_most, m1_rule_u8, m1_table, processed, rerun,
                                        robot_geometry, window_flags, with_error, write_u8)
 from jaxfilters.mask_lookup import mask_origin_terms
@@ -211,9 +215,18 @@ def _edges_batch(cost, mask, axes, idx, state, window, run, *, config: KeepoutCo
   tx, ty, inv, trusted = edge_tables(mask)
   tables = (tx, ty, mask.origin, inv)
   source = m1_table(mask.data).reshape(-1)
-  one = lambda c, ax, i, win, rn, st: _edges_one(c, ax, tables, source, i, (hm, wm), win, rn, st, config=config,
-                                                 packed=packed)
-  new = jax.vmap(one)(cost, axes, idx, window, run, state)
+  if pallas.use_pallas(config.frame_kernel, config.pallas, table_bytes=source.size):
+    xc, xs, yc, ys, t = axes
+    ints = jnp.stack([idx, window[:, 0], window[:, 2], window[:, 1], jnp.where(run, window[:, 3], window[:, 1]),
+                      state.is_pose_lethal.astype(jnp.int32)], axis=1).astype(jnp.int32)
+    floats = jnp.stack([t[:, 0], t[:, 1], mask.origin[idx, 0], mask.origin[idx, 1], inv[idx]], axis=1)
+    new = pallas.other_frame_write(cost, (xc, xs, yc, ys), (tx, ty), source, ints, floats.astype(jnp.float32),
+                                   mshape=(hm, wm), escape=config.override_lethal_cost,
+                                   lethal_cost=config.lethal_override_cost, tuning=config.pallas)
+  else:
+    one = lambda c, ax, i, win, rn, st: _edges_one(c, ax, tables, source, i, (hm, wm), win, rn, st,
+                                                   config=config, packed=packed)
+    new = jax.vmap(one)(cost, axes, idx, window, run, state)
 
   def exact(a):
     c, ax, i, st, win, rn = a

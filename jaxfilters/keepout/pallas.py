@@ -75,6 +75,10 @@ class PallasTuning:
     interpret: run the kernel in the Pallas interpreter (XLA on any backend,
       slow; for tests on CPU). `KeepoutConfig(kernel="pallas")` on a backend
       other than GPU raises unless this is True.
+    frame_block_cells, frame_num_warps: the other-frame kernel's
+      (`other_frame_write`) cells and warps per program (a power of two in
+      [16, 65536]; 1..32 warps). The defaults, 512 and 2, were the fastest of
+      2048/4, 1024/4, 4096/8 and 512/2 on an H200 (BENCHMARKS.md).
   """
   layout: str = "rows"
   block_cells: int = 2048
@@ -82,13 +86,17 @@ class PallasTuning:
   num_stages: int = 1
   in_place: bool = False
   interpret: bool = False
+  frame_block_cells: int = 512
+  frame_num_warps: int = 2
 
   def __post_init__(self):
     if self.layout not in LAYOUTS:
       raise ValueError(f"PallasTuning.layout must be one of {LAYOUTS}; got {self.layout!r}")
     for name, ok, want in (
         ("block_cells", lambda v: 16 <= v <= 65536 and v & (v - 1) == 0, "a power of two in [16, 65536]"),
+        ("frame_block_cells", lambda v: 16 <= v <= 65536 and v & (v - 1) == 0, "a power of two in [16, 65536]"),
         ("num_warps", lambda v: v in (1, 2, 4, 8, 16, 32), "one of 1, 2, 4, 8, 16, 32"),
+        ("frame_num_warps", lambda v: v in (1, 2, 4, 8, 16, 32), "one of 1, 2, 4, 8, 16, 32"),
         ("num_stages", lambda v: 1 <= v <= 8, "an int in [1, 8]")):
       v = getattr(self, name)
       if isinstance(v, (bool, np.bool_)) or not isinstance(v, (int, np.integer)) or not ok(int(v)):
@@ -342,3 +350,103 @@ def aligned_write(cost, table, params, *, escape: bool, lethal_cost: int, tuning
       name=f"keepout_aligned_{tuning.layout}",
   )
   return call(params, operand, table).reshape(b, h, w)
+
+
+# ----------------------------------------------------------------------------- other frame (SE2)
+
+FRAME_INT_PARAMS = 6      # per-robot int32: i, x0, x1, y0, y1, lethal
+FRAME_FLOAT_PARAMS = 5    # per-robot float32: tx, ty, mask origin x, y (leading parts), 1 / mask resolution
+
+
+def _frame_kernel(p_ref, f_ref, xc_ref, xs_ref, yc_ref, ys_ref, cost_ref, tx_ref, ty_ref, src_ref, out_ref, *,
+                  h, w, hm, wm, rows, shift, nblk, escape, lethal_cost):
+  """One program: `rows` rows of one robot as a flat run of rows * 2**shift lanes (the columns padded)."""
+  pl, plgpu = _pallas()
+  pid = pl.program_id(0)
+  r, row0 = jax.lax.div(pid, nblk), jax.lax.rem(pid, nblk) * rows
+  i, x0, x1, y0, y1, lethal = [p_ref[r, k] for k in range(FRAME_INT_PARAMS)]
+  t0, t1, mox, moy, inv = [f_ref[r, k] for k in range(FRAME_FLOAT_PARAMS)]
+  e = jnp.arange(rows << shift, dtype=jnp.int32)
+  row = row0 + (e >> shift)
+  col = e & ((1 << shift) - 1)
+  live = (row < h) & (col < w)
+  c = plgpu.load(cost_ref.at[r, row * w + col], mask=live, other=jnp.uint8(0))
+  xc = plgpu.load(xc_ref.at[r, col], mask=live, other=0.0)
+  xs = plgpu.load(xs_ref.at[r, col], mask=live, other=0.0)
+  yc = plgpu.load(yc_ref.at[r, row], mask=live, other=0.0)
+  ys = plgpu.load(ys_ref.at[r, row], mask=live, other=0.0)
+  px = (xc - ys) + t0                   # `reference.se2_grid`'s sums, in the same order
+  py = (xs + yc) + t1
+
+  def floor_by_edges(x, origin, table_ref, offset, size):   # `geometry.floor_by_edges`, one table read
+    est = jnp.floor((x - origin) * inv - 0.5)
+    n0 = jnp.where(x == x, jnp.clip(est, -1.0, float(size)), -1.0).astype(jnp.int32)
+    edge = plgpu.load(table_ref.at[offset + n0 + 2], mask=live, other=jnp.inf)
+    return n0 + (x >= edge).astype(jnp.int32)
+
+  nx = floor_by_edges(px, mox, tx_ref, i * (wm + 3), wm)
+  ny = floor_by_edges(py, moy, ty_ref, i * (hm + 3), hm)
+  # The window as `common.window_flags` tests it (plain comparisons: any x0, x1).
+  visit = (live & (nx >= 0) & (nx < wm) & (ny >= 0) & (ny < hm) & (col >= x0) & (col < x1)
+           & (row >= y0) & (row < y1))
+  m1 = plgpu.load(src_ref.at[i * (hm * wm) + ny * wm + nx], mask=visit, other=jnp.uint8(0))
+  plgpu.store(out_ref.at[r, row * w + col], _rule(c, m1, lethal, escape=escape, lethal_cost=lethal_cost),
+              mask=live)
+
+
+def other_frame_write(cost, axes, tables, source, ints, floats, *, mshape, escape: bool, lethal_cost: int,
+                      tuning: PallasTuning) -> jax.Array:
+  """The other-frame (SE2) keepout write of a fleet in one Pallas kernel: new cost uint8 [B, H, W].
+
+  Each cell's centre is rotated with the robot's `reference.se2_axes_one` vectors
+  (the same float32 sums as `reference.se2_grid`), its mask cell decided exactly by
+  the edge tables (`geometry.floor_by_edges`, whose proof holds with or without a
+  fused multiply-add) and Nav2's write rule applied: the integers of
+  `other_frame._edges_one` for robots whose tables are trusted, every cell read
+  and written once, the mask bytes read where a cell is visited.
+
+  Args:
+    cost: uint8 [B, H, W].
+    axes: (xc, xs float32 [B, W], yc, ys float32 [B, H]) of `reference.se2_axes_one`.
+    tables: (tx float32 [M * (Wm + 3)], ty float32 [M * (Hm + 3)]) from `other_frame.edge_tables`.
+    source: uint8 [M * Hm * Wm] the masks' (cost + 1) bytes (`common.m1_table`), flat.
+    ints: int32 [B, 6] (mask i, x0, x1, y0, y1 of the update window, rows empty for a robot
+      that does not run; lethal) per robot.
+    floats: float32 [B, 5] (tx, ty, the mask origin's leading parts, 1 / resolution as
+      `geometry.edge_reciprocal`) per robot.
+    mshape: static (Hm, Wm). escape, lethal_cost: as `aligned_write`. tuning: static PallasTuning
+      (its frame_block_cells, frame_num_warps, num_stages and interpret; a program takes
+      whole rows of one robot as a flat run, the columns padded to a power of two).
+
+  Returns:
+    uint8 [B, H, W].
+  """
+  b, h, w = cost.shape
+  hm, wm = mshape
+  for name, a, dt in (("source", source, jnp.uint8), ("ints", ints, jnp.int32), ("floats", floats, jnp.float32)):
+    if a.dtype != dt:
+      raise ValueError(f"{name} must be {jnp.dtype(dt).name}; got {a.dtype}")
+  if ints.shape != (b, FRAME_INT_PARAMS) or floats.shape != (b, FRAME_FLOAT_PARAMS):
+    raise ValueError(f"ints must be [{b}, {FRAME_INT_PARAMS}] and floats [{b}, {FRAME_FLOAT_PARAMS}]; "
+                     f"got {tuple(ints.shape)}, {tuple(floats.shape)}")
+  if source.size > _MAX_TABLE_BYTES or b * h * w > _MAX_COST_BYTES:
+    raise ValueError(f"the other-frame kernel indexes with 32-bit offsets: masks and costmaps must be < 2 GiB; "
+                     f"got {source.size} and {b * h * w} bytes. Use kernel='xla'")
+  if b == 0:
+    return cost
+  pl, plgpu = _pallas()
+  span = _next_pow2(w)
+  rows = min(_next_pow2(h), max(1, tuning.frame_block_cells // span))
+  nblk = -(-h // rows)
+  statics = dict(h=h, w=w, hm=hm, wm=wm, rows=rows, shift=span.bit_length() - 1, nblk=nblk,
+                 escape=bool(escape), lethal_cost=int(lethal_cost))
+  xc, xs, yc, ys = axes
+  call = pl.pallas_call(
+      lambda *refs: _frame_kernel(*refs, **statics),
+      out_shape=jax.ShapeDtypeStruct((b, h * w), jnp.uint8),
+      grid=(b * nblk,),
+      interpret=tuning.interpret,
+      compiler_params=plgpu.CompilerParams(num_warps=tuning.frame_num_warps, num_stages=tuning.num_stages),
+      name="keepout_other_frame",
+  )
+  return call(ints, floats, xc, xs, yc, ys, cost.reshape(b, h * w), tables[0], tables[1], source).reshape(b, h, w)
