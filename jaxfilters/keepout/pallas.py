@@ -77,8 +77,9 @@ class PallasTuning:
       other than GPU raises unless this is True.
     frame_block_cells, frame_num_warps: the other-frame kernel's
       (`other_frame_write`) cells and warps per program (a power of two in
-      [16, 65536]; 1..32 warps). The defaults, 512 and 2, were the fastest of
-      2048/4, 1024/4, 4096/8 and 512/2 on an H200 (BENCHMARKS.md).
+      [16, 65536]; 1..32 warps). The defaults, 512 cells and 1 warp, were the
+      fastest of eleven settings from 128 to 4096 cells and 1 to 8 warps on an
+      H200 (docs/benchmarks_history.md).
   """
   layout: str = "rows"
   block_cells: int = 2048
@@ -87,7 +88,7 @@ class PallasTuning:
   in_place: bool = False
   interpret: bool = False
   frame_block_cells: int = 512
-  frame_num_warps: int = 2
+  frame_num_warps: int = 1
 
   def __post_init__(self):
     if self.layout not in LAYOUTS:
