@@ -94,7 +94,9 @@ def size(params: dict | None) -> str:
   if "mask" in p:
     parts.append(f"{p['mask'][0]}x{p['mask'][1]} mask")
   if "bytes" in p:
-    parts.append(str(p["bytes"]))
+    n = p["bytes"]
+    parts.append(f"{n / 2 ** 30:g} GiB" if isinstance(n, int) and n >= 2 ** 30 else
+                 f"{n / 2 ** 20:g} MiB" if isinstance(n, int) else str(n))
   return ", ".join(parts)
 
 
