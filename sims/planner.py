@@ -31,11 +31,15 @@ drives into a keepout cell).
 
 Cost of a tick (the fleet's largest part; benchmarks/fleet_breakdown.py
 times it): the candidates form a speeds x yaw rates grid, so speed ramps and
-heading rotations run once per axis value (`rollout_grid`); the costmap rules
+heading rotations run once per axis value (`ramp_tables`); the costmap rules
 are one uint16 code per cell (`lookup_table`, built with the costmap at its
 5 Hz rate), so each rollout point costs one gather for every rule and the
-clearance; the navigation value and its descent stencil are one gather per
-candidate (`navigation.value_and_direction`).
+clearance. On the CPU the points are materialised once (`rollout_grid`) and
+each rule runs over them, the navigation value and its descent stencil one
+gather per candidate (`navigation.value_and_direction`); on a GPU every rule
+is folded into one pass over the rollout steps (`one_pass_terms`) and the
+navigation lookups are elementwise (`navigation.value_and_direction_xy`), so
+the tick writes no per-point array (`rollout_mode`).
 
 Written for one robot; sims/env.py vmaps it over the robots of a world.
 """
