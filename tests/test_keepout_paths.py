@@ -465,6 +465,23 @@ def test_other_frame_pallas_kernel_equals_the_exact_path(n):
     np.testing.assert_array_equal(np.asarray(st.last_pose_lethal), np.asarray(want[1].last_pose_lethal))
 
 
+def test_frame_kernel_pallas_off_gpu_raises_or_runs_in_the_interpreter():
+  """`frame_kernel="pallas"` never falls back silently: off a GPU it raises naming the field; with the
+  interpreter it runs under the CPU's default loop and gives the exact path's integers."""
+  case, tf = _se2_cases()[2]
+  cm, mask, state, window, mask_index, enabled = case
+  poses = jnp.zeros((B, 3), jnp.float32)
+  run = lambda cfg: ko.keepout_filter(cm, mask, poses, state, mask_index=mask_index, enabled=enabled, window=window,
+                                      transform=jnp.asarray(tf), config=cfg)[0].cost
+  if jax.default_backend() != "gpu":
+    with pytest.raises(ValueError, match=r"KeepoutConfig\(frame_kernel='pallas'\) needs a GPU backend.*"
+                                         r"Use frame_kernel='xla' or 'auto'"):
+      run(ko.KeepoutConfig(frame_kernel="pallas"))
+  got = run(ko.KeepoutConfig(frame_kernel="pallas", pallas=ko.PallasTuning(interpret=True)))
+  want = _run(*case, jnp.asarray(tf), PLAIN, exact=True)[0]
+  np.testing.assert_array_equal(np.asarray(got), want)
+
+
 def test_other_frame_kernels_run_the_exact_path_where_edge_tables_are_untrusted():
   # A 2**-41 m mask (below the tables' range): the robots on it must run the exact path.
   rng = np.random.default_rng(3)

@@ -106,7 +106,8 @@ def other_frame_batch(costmap, mask, idx, idx_ok, state, window, enabled, transf
   """The fast other-frame keepout over a fleet: same integers as the exact path.
 
   `loop` "map" runs the CPU kernel (checked floors, codes, exact fixes), "vmap" the
-  edge-table kernel (see the module docstring).
+  edge-table kernel (see the module docstring); a Pallas `config.frame_kernel`
+  ("pallas", or "auto" on a GPU) runs the edge tables in Triton whatever the loop.
 
   Returns:
     (new cost uint8 [B, H, W], new state).
@@ -124,7 +125,8 @@ def other_frame_batch(costmap, mask, idx, idx_ok, state, window, enabled, transf
   axes = jax.vmap(axes_of, in_axes=(*geo_axes, 0))(*robot_geometry(costmap, mask), transform)
   run = enabled & idx_ok
   new_state = with_error(jax.vmap(processed)(state, run), ~idx_ok)
-  if loop == "vmap":
+  if loop == "vmap" or pallas.use_pallas(config.frame_kernel, config.pallas, table_bytes=mask.data.size,
+                                         field="frame_kernel"):
     return _edges_batch(costmap.cost, mask, axes, idx, state, window, run, config=config,
                         packed=w % 4 == 0), new_state
 
@@ -215,7 +217,7 @@ def _edges_batch(cost, mask, axes, idx, state, window, run, *, config: KeepoutCo
   tx, ty, inv, trusted = edge_tables(mask)
   tables = (tx, ty, mask.origin, inv)
   source = m1_table(mask.data).reshape(-1)
-  if pallas.use_pallas(config.frame_kernel, config.pallas, table_bytes=source.size):
+  if pallas.use_pallas(config.frame_kernel, config.pallas, table_bytes=source.size, field="frame_kernel"):
     xc, xs, yc, ys, t = axes
     ints = jnp.stack([idx, window[:, 0], window[:, 2], window[:, 1], jnp.where(run, window[:, 3], window[:, 1]),
                       state.is_pose_lethal.astype(jnp.int32)], axis=1).astype(jnp.int32)

@@ -117,15 +117,17 @@ def check_kernel(kernel) -> str:
   return kernel
 
 
-def use_pallas(kernel: str, tuning: PallasTuning, *, table_bytes: int = 0, backend: str | None = None) -> bool:
-  """Whether the aligned keepout write runs the Pallas kernel (decided at trace time).
+def use_pallas(kernel: str, tuning: PallasTuning, *, table_bytes: int = 0, backend: str | None = None,
+               field: str = "kernel") -> bool:
+  """Whether a keepout kernel runs in Pallas (decided at trace time).
 
   Args:
     kernel: "xla" (never), "pallas" (always; raises where it cannot run) or
       "auto" (on a GPU backend, when the table fits; XLA otherwise).
     tuning: the PallasTuning (its `interpret` lets "pallas" run off GPU).
-    table_bytes: size of the (cost + 1) mask table the kernel would read.
+    table_bytes: size of the mask table the kernel would read.
     backend: the backend to decide for; default `jax.default_backend()`.
+    field: the KeepoutConfig field that chose `kernel` ("kernel" or "frame_kernel"), for messages.
 
   Raises:
     ValueError: kernel="pallas" on a backend other than GPU without
@@ -140,13 +142,12 @@ def use_pallas(kernel: str, tuning: PallasTuning, *, table_bytes: int = 0, backe
     return backend == "gpu" and fits
   if backend != "gpu" and not tuning.interpret:
     raise ValueError(
-        f"KeepoutConfig(kernel='pallas') needs a GPU backend (the kernel lowers through Triton); "
-        f"the default backend is {backend!r}. Use kernel='xla' or 'auto', or "
+        f"KeepoutConfig({field}='pallas') needs a GPU backend (the kernel lowers through Triton); "
+        f"the default backend is {backend!r}. Use {field}='xla' or 'auto', or "
         f"PallasTuning(interpret=True) to run the kernel in the (slow) Pallas interpreter")
   if not fits:
     raise ValueError(f"the Pallas keepout kernel reads the mask table with 32-bit offsets: it must be "
-                     f"< 2 GiB; got {table_bytes} bytes (masks M x (Hm + 2H) x (Wm + 2W)). "
-                     f"Use kernel='xla'")
+                     f"< 2 GiB; got {table_bytes} bytes. Use {field}='xla'")
   return True
 
 
