@@ -257,11 +257,7 @@ def one_pass_terms(lut, origin, res, pose, cmd, speeds, yaw_rates, speed_cap, sp
   near = _nearest_others(pose, others, others_valid, config)
   m = near["neg"].shape[0]
   m_origin, m_res = speed_mask.origin[0], speed_mask.resolution[0]
-  here = lut_at(lut, origin, res, pose[0], pose[1])
-  rules = (jnp.uint16(LUT_LETHAL)
-           | jnp.where((here & LUT_HARD) == 0, jnp.uint16(LUT_HARD), jnp.uint16(0))
-           | jnp.where(((here & (LUT_INSCRIBED | LUT_LETHAL)) == 0) | p.inscribed_is_collision,
-                       jnp.uint16(LUT_INSCRIBED), jnp.uint16(0)))
+  rules = _blocking_flags(lut_at(lut, origin, res, pose[0], pose[1]), p.inscribed_is_collision)
   cap_prev = jnp.minimum(speed_cap_xy(speed_cap, m_origin, m_res, pose[0], pose[1]), limit_now)
   x, y = pose[0], pose[1]
   seen = top = jnp.uint16(0)
@@ -619,13 +615,7 @@ def _costmap_rules(lut, origin, res, pose, x, y, mx, my, *, inscribed_is_collisi
   """
   code_mid = lut_at(lut, origin, res, mx, my)                     # [Nv, Nw, T]
   code_end = lut_at(lut, origin, res, x, y)
-  here = lut_at(lut, origin, res, pose[0], pose[1])
-  # Flags that block a candidate for this robot: lethal/unknown always; a hard cell unless the
-  # robot stands on one; an inscribed cell unless it stands on an inscribed or lethal one.
-  rules = (jnp.uint16(LUT_LETHAL)
-           | jnp.where((here & LUT_HARD) == 0, jnp.uint16(LUT_HARD), jnp.uint16(0))
-           | jnp.where(((here & (LUT_INSCRIBED | LUT_LETHAL)) == 0) | inscribed_is_collision,
-                       jnp.uint16(LUT_INSCRIBED), jnp.uint16(0)))
+  rules = _blocking_flags(lut_at(lut, origin, res, pose[0], pose[1]), inscribed_is_collision)
   seen = (jax.lax.reduce(code_mid, jnp.uint16(0), jax.lax.bitwise_or, (2,))
           | jax.lax.reduce(code_end, jnp.uint16(0), jax.lax.bitwise_or, (2,)))
   top = jnp.maximum(jnp.max(code_mid, axis=-1), jnp.max(code_end, axis=-1))
@@ -645,6 +635,15 @@ def _nearest_others(pose, others, others_valid, config: FleetConfig) -> dict:
   m = min(_MONITORED, others.shape[0])
   neg, near = jax.lax.top_k(-d2_now, m)
   return {"neg": neg, "rel": rel_now[near], "x": others[near, 0], "y": others[near, 1]}
+
+
+def _blocking_flags(here, inscribed_is_collision: bool):
+  """uint16 []: table flags that block a candidate for a robot on code `here`: lethal/unknown always; a hard
+  cell unless it stands on one; an inscribed cell unless on an inscribed or lethal one (or `inscribed_is_collision`)."""
+  return (jnp.uint16(LUT_LETHAL)
+          | jnp.where((here & LUT_HARD) == 0, jnp.uint16(LUT_HARD), jnp.uint16(0))
+          | jnp.where(((here & (LUT_INSCRIBED | LUT_LETHAL)) == 0) | inscribed_is_collision,
+                      jnp.uint16(LUT_INSCRIBED), jnp.uint16(0)))
 
 
 def _monitor(pose, near: dict, x, y, config: FleetConfig):

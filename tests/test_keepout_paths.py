@@ -13,6 +13,7 @@ hypothesis.
 """
 
 import dataclasses
+import functools
 import math
 from fractions import Fraction
 
@@ -463,6 +464,20 @@ def test_other_frame_pallas_kernel_equals_the_exact_path(n):
                             loop="vmap")
     np.testing.assert_array_equal(np.asarray(cost), np.asarray(want[0].cost), err_msg=f"{cfg}")
     np.testing.assert_array_equal(np.asarray(st.last_pose_lethal), np.asarray(want[1].last_pose_lethal))
+
+
+def test_other_frame_pallas_kernel_runs_large_batches_in_chunks(monkeypatch):
+  """A fleet whose costmaps pass the kernel's 32-bit offsets runs in chunks of robots (here: pretend
+  two robots reach it), with the exact path's integers; before, the default kernel raised there."""
+  from jaxfilters.keepout import pallas as kp
+  case, tf = _se2_cases()[2]
+  args = _impl_inputs(case, jnp.asarray(tf), lower_parts=True)
+  monkeypatch.setattr(kp, "_MAX_COST_BYTES", 2 * H * W + 1)
+  cfg = dataclasses.replace(PLAIN, frame_kernel="pallas", pallas=ko.PallasTuning(interpret=True))
+  run = functools.partial(other_frame.other_frame_batch, config=cfg, loop="vmap")
+  assert str(jax.make_jaxpr(run)(*args)).count("pallas_call") == -(-B // 2)
+  want = process.filter_batch(*args, config=PLAIN, exact=True)[0].cost
+  np.testing.assert_array_equal(np.asarray(run(*args)[0]), np.asarray(want))
 
 
 def test_frame_kernel_pallas_off_gpu_raises_or_runs_in_the_interpreter():

@@ -125,10 +125,11 @@ def other_frame_batch(costmap, mask, idx, idx_ok, state, window, enabled, transf
   axes = jax.vmap(axes_of, in_axes=(*geo_axes, 0))(*robot_geometry(costmap, mask), transform)
   run = enabled & idx_ok
   new_state = with_error(jax.vmap(processed)(state, run), ~idx_ok)
-  if loop == "vmap" or pallas.use_pallas(config.frame_kernel, config.pallas, table_bytes=mask.data.size,
-                                         field="frame_kernel"):
+  frame_pallas = pallas.use_pallas(config.frame_kernel, config.pallas, table_bytes=mask.data.size,
+                                   field="frame_kernel")
+  if loop == "vmap" or frame_pallas:
     return _edges_batch(costmap.cost, mask, axes, idx, state, window, run, config=config,
-                        packed=w % 4 == 0), new_state
+                        packed=w % 4 == 0, use_pallas=frame_pallas), new_state
 
   def codes(a):
     ax, i, win, rn = a
@@ -210,14 +211,16 @@ def _edges_one(cost, axes, tables, source, i, mshape, window, run, state, *, con
   return unpack(write_rule(pack(cost), word(planes), state, config))
 
 
-def _edges_batch(cost, mask, axes, idx, state, window, run, *, config: KeepoutConfig, packed: bool):
-  """The edge-table kernel over a fleet, then the exact path for robots of untrusted masks."""
+def _edges_batch(cost, mask, axes, idx, state, window, run, *, config: KeepoutConfig, packed: bool,
+                 use_pallas: bool):
+  """The edge-table kernel over a fleet (in Pallas with `use_pallas`: `pallas.other_frame_write`),
+  then the exact path for robots of untrusted masks."""
   b = cost.shape[0]
   _, hm, wm = mask.data.shape
   tx, ty, inv, trusted = edge_tables(mask)
   tables = (tx, ty, mask.origin, inv)
   source = m1_table(mask.data).reshape(-1)
-  if pallas.use_pallas(config.frame_kernel, config.pallas, table_bytes=source.size, field="frame_kernel"):
+  if use_pallas:
     xc, xs, yc, ys, t = axes
     ints = jnp.stack([idx, window[:, 0], window[:, 2], window[:, 1], jnp.where(run, window[:, 3], window[:, 1]),
                       state.is_pose_lethal.astype(jnp.int32)], axis=1).astype(jnp.int32)

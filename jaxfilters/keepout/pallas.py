@@ -283,6 +283,19 @@ def block_shape(h: int, w: int, tuning: PallasTuning) -> tuple[int, int, int]:
   return rows, span, -(-h // rows)
 
 
+def _robots_per_call(h: int, w: int) -> int:
+  """Robots of H x W costmaps one kernel call takes so that its costmap offsets stay 32-bit exact."""
+  return max(1, _MAX_COST_BYTES // (h * w))
+
+
+def _in_chunks(fn, batched: tuple, chunk: int) -> jax.Array:
+  """fn over consecutive chunks of `chunk` robots of the `batched` arrays, concatenated (a copy of
+  each chunk in and out: slower, still exact; see the module docstring)."""
+  b = batched[0].shape[0]
+  parts = [fn(*jax.tree.map(lambda a: a[s:s + chunk], batched)) for s in range(0, b, chunk)]
+  return jnp.concatenate(parts, axis=0)
+
+
 def aligned_write(cost, table, params, *, escape: bool, lethal_cost: int, tuning: PallasTuning) -> jax.Array:
   """The aligned keepout write for a fleet in one Pallas kernel: new cost uint8 [B, H, W].
 
@@ -323,13 +336,9 @@ def aligned_write(cost, table, params, *, escape: bool, lethal_cost: int, tuning
     raise ValueError(f"the mask table must be < 2 GiB for the kernel's 32-bit offsets; got {table.size} bytes")
   if b == 0:
     return cost
-  per_robot = h * w
-  chunk = max(1, _MAX_COST_BYTES // per_robot)
-  if b > chunk:
-    # Split so each call's arrays keep exact 32-bit offsets (see the module docstring).
-    parts = [aligned_write(cost[s:s + chunk], table, params[s:s + chunk], escape=escape,
-                           lethal_cost=lethal_cost, tuning=tuning) for s in range(0, b, chunk)]
-    return jnp.concatenate(parts, axis=0)
+  if b > _robots_per_call(h, w):
+    return _in_chunks(lambda c, p: aligned_write(c, table, p, escape=escape, lethal_cost=lethal_cost, tuning=tuning),
+                      (cost, params), _robots_per_call(h, w))
   pl, plgpu = _pallas()
   rows, span, nblk = block_shape(h, w, tuning)
   statics = dict(h=h, w=w, rows=rows, span=span, nblk=nblk, escape=bool(escape), lethal_cost=int(lethal_cost),
@@ -421,7 +430,7 @@ def other_frame_write(cost, axes, tables, source, ints, floats, *, mshape, escap
       whole rows of one robot as a flat run, the columns padded to a power of two).
 
   Returns:
-    uint8 [B, H, W].
+    uint8 [B, H, W]. A batch of 2 GiB or more runs in chunks of robots, as `aligned_write`'s.
   """
   b, h, w = cost.shape
   hm, wm = mshape
@@ -431,11 +440,15 @@ def other_frame_write(cost, axes, tables, source, ints, floats, *, mshape, escap
   if ints.shape != (b, FRAME_INT_PARAMS) or floats.shape != (b, FRAME_FLOAT_PARAMS):
     raise ValueError(f"ints must be [{b}, {FRAME_INT_PARAMS}] and floats [{b}, {FRAME_FLOAT_PARAMS}]; "
                      f"got {tuple(ints.shape)}, {tuple(floats.shape)}")
-  if source.size > _MAX_TABLE_BYTES or b * h * w > _MAX_COST_BYTES:
-    raise ValueError(f"the other-frame kernel indexes with 32-bit offsets: masks and costmaps must be < 2 GiB; "
-                     f"got {source.size} and {b * h * w} bytes. Use kernel='xla'")
+  if source.size > _MAX_TABLE_BYTES:
+    raise ValueError(f"the other-frame kernel reads the masks with 32-bit offsets: they must be < 2 GiB; "
+                     f"got {source.size} bytes. Use frame_kernel='xla'")
   if b == 0:
     return cost
+  if b > _robots_per_call(h, w):
+    return _in_chunks(lambda c, xc, xs, yc, ys, i, f: other_frame_write(
+        c, (xc, xs, yc, ys), tables, source, i, f, mshape=mshape, escape=escape, lethal_cost=lethal_cost,
+        tuning=tuning), (cost, *axes, ints, floats), _robots_per_call(h, w))
   pl, plgpu = _pallas()
   span = _next_pow2(w)
   rows = min(_next_pow2(h), max(1, tuning.frame_block_cells // span))
