@@ -52,7 +52,7 @@ import numpy as np
 
 from jaxfilters import constants
 from jaxfilters.types import FilterMask
-from sims import navigation
+from sims import navigation, sharding
 from sims.config import FleetConfig
 
 _F32 = jnp.float32
@@ -633,7 +633,7 @@ def _nearest_others(pose, others, others_valid, config: FleetConfig) -> dict:
   rel_now = others - pose[None, :2]
   d2_now = jnp.where(others_valid, jnp.sum(rel_now * rel_now, axis=-1), jnp.inf)   # [K]
   m = min(_MONITORED, others.shape[0])
-  neg, near = jax.lax.top_k(-d2_now, m)
+  neg, near = sharding.top_k(-d2_now, m)      # lax.top_k would gather a sharded batch
   return {"neg": neg, "rel": rel_now[near], "x": others[near, 0], "y": others[near, 1]}
 
 

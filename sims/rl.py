@@ -86,7 +86,7 @@ from jaxfilters import constants
 from jaxfilters.inflation import inflate
 from jaxfilters.speed import SpeedState, speed_filter
 from jaxfilters.static_layer import static_layer
-from sims import navigation, planner
+from sims import navigation, planner, sharding
 from sims import rl_kernels as kernels
 from sims.rl_kernels import clip_command
 from sims.config import FleetConfig
@@ -407,7 +407,7 @@ class NavEnv(mjx_env.MjxEnv):
       bank, lay = task.bank, task.layout
       p_max = bank.spawns.shape[1]
       score = jnp.where(jnp.arange(p_max) < bank.spawn_count[lay], jax.random.uniform(k_spawn, (p_max,)), -1.0)
-      _, idx = jax.lax.top_k(score, self.num_robots)
+      _, idx = sharding.top_k(score, self.num_robots)   # lax.top_k would gather a sharded batch
       xy = bank.spawns[lay][idx]
       qpos = ws.data.qpos.at[:, :2].set(xy)
       ws = dataclasses.replace(ws, data=ws.data.replace(qpos=qpos))

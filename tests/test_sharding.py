@@ -83,6 +83,31 @@ out["rl_obs_max_diff"] = float(np.max(np.abs(np.asarray(res["plain"].obs) - np.a
 out["rl_moved"] = float(np.min(np.linalg.norm(np.asarray(s.data.qpos[:, 0, :2])
                                               - np.asarray(start.data.qpos[:, 0, :2]), axis=-1)))
 
+# Communication: worlds and envs are independent, so a sharded step moves no per-world data between
+# devices. Collective ops in the compiled programs: an all-gather or all-to-all would copy the batch.
+import re
+def collectives(compiled):
+  found = re.findall(r"= (.+?) (all-gather|all-to-all|collective-permute|reduce-scatter|all-reduce)(?:-start)?\\(",
+                     compiled.as_text())
+  return sorted({{f"{{kind}} {{shape[:40]}}" for shape, kind in found}})
+out["fleet_collectives"] = collectives(env.rollout_fn({STEPS}, mesh=mesh).lower(env.params, s0).compile())
+# The RL env's reset in its randomised training layouts (drawn spawn points), run at every auto-reset.
+from sims.randomization import training_env
+from sims.rl import NavEnvConfig
+renv, _ = training_env(None, randomize=True, seed=0, layouts=1, config=NavEnvConfig())
+w = sharding.worlds_sharding(mesh)
+rk = jax.device_put(jax.random.split(jax.random.PRNGKey(2), 8), w)
+out["rl_reset_collectives"] = collectives(jax.jit(jax.vmap(renv.reset), in_shardings=w, out_shardings=w)
+                                          .lower(rk).compile())
+# The same reset with jax.lax.top_k for the spawn draw: the check sees the gather it adds.
+real_top_k = sharding.top_k
+sharding.top_k = jax.lax.top_k
+try:
+  out["rl_reset_collectives_lax_top_k"] = collectives(jax.jit(jax.vmap(renv.reset), in_shardings=w, out_shardings=w)
+                                                      .lower(rk).compile())
+finally:
+  sharding.top_k = real_top_k
+
 # Mesh errors.
 errs = []
 for bad in (0, {DEVICES + 1}, "most"):
@@ -140,6 +165,37 @@ def test_sharded_rl_env_equals_unsharded(single):
   assert out["rl_goal_equal"] and out["rl_done_equal"]
   assert out["rl_obs_max_diff"] < 1e-5
   assert out["rl_moved"] > 0.05                # the robots really drove (0.6 s at up to 0.5 m/s)
+
+
+def test_sharded_steps_move_no_batch_between_devices(single):
+  """No all-gather / all-to-all in the sharded fleet rollout or RL reset: XLA's TopK gathered the whole batch
+  onto every device (the RL env's spawn draw at each auto-reset, the collision monitor's nearest robots)."""
+  out, _, _ = single
+  moved = [c for c in out["fleet_collectives"] + out["rl_reset_collectives"] if not c.startswith("all-reduce pred[]")]
+  assert moved == [], moved
+  # The only all-reduces left: the keepout filter's batch-level decisions (one bool each).
+  assert all(c == "all-reduce pred[]" for c in out["fleet_collectives"]), out["fleet_collectives"]
+  assert any(c.startswith("all-gather") for c in out["rl_reset_collectives_lax_top_k"]), \
+      out["rl_reset_collectives_lax_top_k"]
+
+
+def test_top_k_equals_lax_top_k_with_ties_and_infinities():
+  import jax
+  import jax.numpy as jnp
+  from sims import sharding
+  rng = np.random.default_rng(0)
+  for trial in range(60):
+    n = int(rng.integers(1, 10))
+    k = int(rng.integers(1, n + 1))
+    x = rng.integers(-2, 3, size=(4, n)).astype(np.float32)     # many ties
+    x[rng.random((4, n)) < 0.3] = -np.inf
+    x[rng.random((4, n)) < 0.1] = np.inf
+    got, want = sharding.top_k(jnp.asarray(x), k), jax.lax.top_k(jnp.asarray(x), k)
+    np.testing.assert_array_equal(np.asarray(got[1]), np.asarray(want[1]), err_msg=f"{x} k={k}")
+    np.testing.assert_array_equal(np.asarray(got[0]), np.asarray(want[0]))
+    assert got[1].dtype == jnp.int32
+  with pytest.raises(ValueError, match="k must be between 1 and the last axis \\(3\\); got 4"):
+    sharding.top_k(jnp.zeros(3), 4)
 
 
 def test_mesh_errors_name_expected_and_got(single):
