@@ -248,19 +248,31 @@ def train_with_curve(adapter: GymnaxAdapter, algo, key: jax.Array, *, num_calls:
                              mesh=mesh)
 
 
+def train_program(algo, key: jax.Array, mesh=None):
+  """(initial train state, jitted `train(ts) -> ts`) of one training call, the env batch sharded over `mesh`.
+
+  Without a mesh: rejax's program on the default device. With a 1-D mesh
+  (`sims.sharding.make_mesh`): the state placed with `train_state_shardings`
+  and the program of `block_shuffle(algo, mesh)`, compiled for those shardings.
+  Call it under `jax.numpy_rank_promotion("allow")` (rejax broadcasts internally).
+
+  Raises:
+    ValueError: see `block_shuffle`.
+  """
+  ts = jax.jit(algo.init_state)(key)
+  if mesh is None:
+    return ts, jax.jit(lambda ts: algo.train(train_state=ts)[0])
+  shardings = train_state_shardings(ts, mesh)
+  blocked = block_shuffle(algo, mesh)
+  return jax.device_put(ts, shardings), jax.jit(lambda ts: blocked.train(train_state=ts)[0],
+                                                in_shardings=(shardings,), out_shardings=shardings)
+
+
 def _train_with_curve(adapter, algo, key, *, num_calls, num_eval, callback, mesh):
   k_init, k_eval = jax.random.split(key)
   evaluate = jax.jit(lambda ts, k: {n: jnp.mean(v) for n, v in
                                     evaluate_policy(adapter, mean_policy(algo, ts), k, num_eval).items()})
-  ts = jax.jit(algo.init_state)(k_init)
-  if mesh is None:
-    train = jax.jit(lambda ts: algo.train(train_state=ts)[0])
-  else:
-    shardings = train_state_shardings(ts, mesh)
-    ts = jax.device_put(ts, shardings)
-    blocked = block_shuffle(algo, mesh)
-    train = jax.jit(lambda ts: blocked.train(train_state=ts)[0], in_shardings=(shardings,),
-                    out_shardings=shardings)
+  ts, train = train_program(algo, k_init, mesh)
   # The two programs compile at the same time (XLA compiles outside the GIL): the wall time is
   # the longer compile, not the sum.
   # jax's config contexts are per thread: each compile thread sets rejax's rank promotion again.

@@ -1,0 +1,118 @@
+"""PPO training throughput over several devices against one, the same training program in one process.
+
+    python -m benchmarks.ppo_scaling --num-envs 65536 262144 --devices 4 --json --out ppo_scaling.json
+
+For each --num-envs N: `jaxfilters rl train --randomize`'s training call
+(`sims.ppo.train_program`: rejax PPO, the env batch sharded over D devices with
+the per-device minibatch shuffle) is compiled for D = --devices and for one
+device, then timed: one warm-up call and --calls timed calls of --iters PPO
+iterations (N envs x --num-steps steps each). Agent env-steps per second are
+the median over the timed calls; `speedup` = D devices / one device at the
+same N (the same algorithm and batch, so the same learning curve per sample:
+`jaxfilters rl train --devices` checks that on its own curve). Each N also gets
+one device at N / D envs (`per_device_ceiling`: D x that is what D devices
+could reach with no communication at all; below it, the loss is in the
+sharded program, above the one-device figure, the gain is from splitting).
+
+Same env as `rl train --randomize` (the built-in warehouse, --layouts layouts,
+seed 0) and its defaults (--num-steps 32, 8 minibatches, 4 epochs, 64 x 64).
+Every timed call's train state is checked: replicas identical across devices.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import statistics
+import sys
+import time
+
+import jax
+
+
+def _time_program(algo, mesh, calls: int) -> dict:
+  from sims.ppo import replicas_identical, train_program
+  t0 = time.perf_counter()
+  ts, train = train_program(algo, jax.random.PRNGKey(0), mesh)
+  compiled = train.lower(ts).compile()
+  compile_s = time.perf_counter() - t0
+  ts = jax.block_until_ready(compiled(ts))             # warm-up call
+  times = []
+  for _ in range(calls):
+    t = time.perf_counter()
+    ts = jax.block_until_ready(compiled(ts))
+    times.append(time.perf_counter() - t)
+  if mesh is not None and not replicas_identical(ts):
+    raise RuntimeError("the devices' copies of the networks differ after training")
+  return {"compile_s": compile_s, "call_s": times, "env_steps_per_call": int(algo.total_timesteps)}
+
+
+def main(argv=None) -> int:
+  ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+  ap.add_argument("--num-envs", type=int, nargs="+", default=[65536])
+  ap.add_argument("--devices", type=int, default=None, help="devices to shard over (default all)")
+  ap.add_argument("--num-steps", type=int, default=32)
+  ap.add_argument("--minibatches", type=int, default=8)
+  ap.add_argument("--iters", type=int, default=1, help="PPO iterations per timed call")
+  ap.add_argument("--calls", type=int, default=3, help="timed calls (after one warm-up)")
+  ap.add_argument("--layouts", type=int, default=16)
+  ap.add_argument("--skip-ceiling", action="store_true", help="no one-device run at N / D envs")
+  ap.add_argument("--json", action="store_true")
+  ap.add_argument("--out", default=None)
+  args = ap.parse_args(argv)
+
+  from sims import sharding
+  from sims.ppo import GymnaxAdapter, make_ppo
+  from sims.randomization import training_env
+  from sims.rl import NavEnvConfig
+
+  d = args.devices or len(jax.devices())
+  for n in args.num_envs:
+    if n % d or (n // d * args.num_steps) % args.minibatches:
+      ap.error(f"--num-envs {n}: must split into {d} devices x {args.minibatches} minibatches")
+  mesh = sharding.make_mesh(d) if d > 1 else None
+  t = time.perf_counter()
+  env, fn = training_env(None, randomize=True, seed=0, layouts=args.layouts, config=NavEnvConfig())
+  adapter = GymnaxAdapter(env, 300, fn, full_reset=True)
+  report = {"device": jax.devices()[0].device_kind, "devices": d, "num_steps": args.num_steps,
+            "minibatches": args.minibatches, "iters_per_call": args.iters, "build_env_s": time.perf_counter() - t,
+            "runs": []}
+
+  def save():
+    text = json.dumps(report, indent=1)
+    if args.out:
+      with open(args.out, "w") as f:
+        f.write(text + "\n")
+    return text
+
+  with jax.numpy_rank_promotion("allow"):
+    for n in args.num_envs:
+      plan = [(n, d, mesh), (n, 1, None)] + ([] if args.skip_ceiling or d == 1 else [(n // d, 1, None)])
+      for envs, devs, m in plan:
+        algo = make_ppo(adapter, timesteps_per_call=args.iters * envs * args.num_steps, num_envs=envs,
+                        num_steps=args.num_steps, num_minibatches=args.minibatches)
+        r = _time_program(algo, m, args.calls)
+        r.update(num_envs=envs, devices=devs,
+                 env_steps_per_s=r["env_steps_per_call"] / statistics.median(r["call_s"]))
+        report["runs"].append(r)
+        print(f"N={envs:>8d} devices={devs}: {r['env_steps_per_s'] / 1e6:7.3f} M env-steps/s "
+              f"(compile {r['compile_s']:.1f} s, calls {', '.join(f'{c:.3f}' for c in r['call_s'])} s)",
+              file=sys.stderr, flush=True)
+        save()
+      by = {(r["num_envs"], r["devices"]): r["env_steps_per_s"] for r in report["runs"]}
+      if d > 1:
+        s = {"num_envs": n, "speedup": by[(n, d)] / by[(n, 1)]}
+        if (n // d, 1) in by:
+          s["per_device_ceiling"] = d * by[(n // d, 1)] / by[(n, 1)]
+        report.setdefault("speedups", []).append(s)
+        print(f"N={n}: {d} devices / 1 = x{s['speedup']:.2f}"
+              + (f" (ceiling without communication x{s['per_device_ceiling']:.2f})" if "per_device_ceiling" in s
+                 else ""), file=sys.stderr, flush=True)
+  text = save()
+  if args.json:
+    print(text)
+  return 0
+
+
+if __name__ == "__main__":
+  sys.exit(main())
