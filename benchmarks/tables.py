@@ -7,7 +7,7 @@
 benchmarks/results/<device>.json holds the latest runs of one device: each run has its date,
 command, commit (where known), baseline and the figures in the shape its harness writes
 (`results` from `python -m benchmarks --json`, `figures` from `python -m benchmarks.rl_bench
---json`, or, for harness `rl_train`, the timing of `jaxfilters rl train`'s results.json). A figure appears in the table from the first run in the file that has it, so a new run
+--json` or `python -m benchmarks.ppo_scaling --out`, or, for harness `rl_train`, the timing of `jaxfilters rl train`'s results.json). A figure appears in the table from the first run in the file that has it, so a new run
 goes first in `runs` and replaces the figures it measured; the older runs keep the rest. To add a
 run, put its JSON object (with `id`, `date`, `command`, `commit`, `baseline`, `harness`) at the
 front of the device's `runs` and run `--write`.
@@ -223,13 +223,38 @@ def rl_train_rows(run: dict, seen: set) -> list[list[str]]:
   return rows
 
 
+def ppo_scaling_rows(run: dict, seen: set) -> list[list[str]]:
+  """Rows of a `python -m benchmarks.ppo_scaling` run: D devices against one at the same batch, and one
+  device at N / D envs (D x that = the ceiling with no communication)."""
+  f = run["figures"]
+  rows = []
+  by = {(r["num_envs"], r["devices"]): r for r in f["runs"]}
+  for s in f.get("speedups", []):
+    n, d = s["num_envs"], f["devices"]
+    key = f"ppo_scaling_{d}_{n}"
+    if key in seen or (n, d) not in by:
+      continue
+    seen.add(key)
+    r, one = by[(n, d)], by[(n, 1)]
+    base = [f"1 device, same call: {rate(one['env_steps_per_s'], 'env-steps/s')} (x{num(s['speedup'])})"]
+    if (n // d, 1) in by:
+      base.append(f"1 device at {n // d:,} envs: {rate(by[(n // d, 1)]['env_steps_per_s'], 'env-steps/s')} "
+                  f"(ceiling with no communication x{num(s['per_device_ceiling'])})")
+    rows.append([f"PPO training calls over {d} GPUs vs 1, same batch (`benchmarks/ppo_scaling.py`)",
+                 f"{n:,} envs x {f['num_steps']} steps ({n // d:,} per GPU)", seconds(r["compile_s"], 0),
+                 f"{num(min(r['call_s']))} s per call of {r['env_steps_per_call'] / 1e6:.1f} M env steps",
+                 f"**{rate(r['env_steps_per_s'], 'env-steps/s')}**", "; ".join(base), "", run["id"]])
+  return rows
+
+
 def device_table(data: dict) -> str:
   """One device's section: heading, table, and the runs its figures come from."""
   seen, rows = set(), []
   for run in data["runs"]:
     kind = run["harness"]
     rows += (harness_rows(run, seen) if kind == "benchmarks.run" else
-             rl_train_rows(run, seen) if kind == "rl_train" else rl_rows(run, seen))
+             rl_train_rows(run, seen) if kind == "rl_train" else
+             ppo_scaling_rows(run, seen) if kind == "benchmarks.ppo_scaling" else rl_rows(run, seen))
   head = ["figure", "size", "compile", "steady", "throughput", "baselines (same run)", "roofline", "run"]
   lines = [f"## {data['device']} ({data['environment']})", "",
            "| " + " | ".join(head) + " |", "| " + " | ".join("---" for _ in head) + " |"]

@@ -22,7 +22,7 @@ def test_every_run_names_its_date_command_and_baseline():
     for run in data["runs"]:
       assert re.fullmatch(r"\d{4}-\d{2}-\d{2}", run["date"]), run
       assert run["command"] and run["baseline"] and run["source"] and run["id"]
-      assert run["harness"] in ("benchmarks.run", "benchmarks.rl_bench", "rl_train")
+      assert run["harness"] in ("benchmarks.run", "benchmarks.rl_bench", "benchmarks.ppo_scaling", "rl_train")
 
 
 def test_one_table_per_device_with_the_fleet_rows_notebook_03_reads():
