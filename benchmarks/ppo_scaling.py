@@ -66,11 +66,18 @@ def main(argv=None) -> int:
   from sims.randomization import training_env
   from sims.rl import NavEnvConfig
 
-  d = args.devices or len(jax.devices())
+  for name in ("num_steps", "minibatches", "iters", "calls", "layouts"):
+    if getattr(args, name) < 1:
+      ap.error(f"--{name.replace('_', '-')} must be >= 1; got {getattr(args, name)}")
+  d = args.devices if args.devices is not None else len(jax.devices())
+  try:
+    mesh = sharding.make_mesh(d) if d != 1 else None
+  except ValueError as e:
+    ap.error(f"--devices: {e}")
   for n in args.num_envs:
-    if n % d or (n // d * args.num_steps) % args.minibatches:
-      ap.error(f"--num-envs {n}: must split into {d} devices x {args.minibatches} minibatches")
-  mesh = sharding.make_mesh(d) if d > 1 else None
+    if n < 1 or n % d or (n // d * args.num_steps) % args.minibatches:
+      ap.error(f"--num-envs {n}: must be a positive multiple of the {d} devices whose per-device batch "
+               f"({n // d if n > 0 else n} envs x {args.num_steps} steps) splits into {args.minibatches} minibatches")
   t = time.perf_counter()
   env, fn = training_env(None, randomize=True, seed=0, layouts=args.layouts, config=NavEnvConfig())
   adapter = GymnaxAdapter(env, 300, fn, full_reset=True)
@@ -87,7 +94,8 @@ def main(argv=None) -> int:
 
   with jax.numpy_rank_promotion("allow"):
     for n in args.num_envs:
-      plan = [(n, d, mesh), (n, 1, None)] + ([] if args.skip_ceiling or d == 1 else [(n // d, 1, None)])
+      plan = [(n, 1, None)] if d == 1 else (
+          [(n, d, mesh), (n, 1, None)] + ([] if args.skip_ceiling else [(n // d, 1, None)]))
       for envs, devs, m in plan:
         algo = make_ppo(adapter, timesteps_per_call=args.iters * envs * args.num_steps, num_envs=envs,
                         num_steps=args.num_steps, num_minibatches=args.minibatches)
