@@ -36,9 +36,12 @@ from jaxfilters.grid import OccupancyGrid
 from benchmarks import nav2_peer
 
 RES = 0.05
-NAMES = ("bandwidth", "keepout_aligned", "keepout_aligned_pallas", "keepout_other_res", "keepout_transform",
-         "keepout_transform_xla",
-         "speed", "binary", "zone", "inflation", "pipeline", "baseline_keepout", "baseline_speed", "fleet")
+# The keepout figures of `bench_keepout` / `bench_keepout_pallas` and their masks' resolution.
+KEEPOUT_MASK_RES = {"keepout_aligned": RES, "keepout_aligned_pallas": RES, "keepout_other_res": 2 * RES,
+                    "keepout_transform": RES, "keepout_transform_xla": RES}
+KEEPOUT_FIGURES = tuple(KEEPOUT_MASK_RES)
+NAMES = ("bandwidth", *KEEPOUT_FIGURES, "speed", "binary", "zone", "inflation", "pipeline", "baseline_keepout",
+         "baseline_speed", "fleet")
 
 
 def sizes(platform_name: str, quick: bool) -> dict:
@@ -157,8 +160,7 @@ def random_poses(seed, b, span):
 
 def bench_keepout(kind, sz, b, config=None):
   hw, n = sz["hw"], sz["mask"]
-  mask_res = {"keepout_aligned": RES, "keepout_aligned_pallas": RES, "keepout_other_res": 2 * RES,
-              "keepout_transform": RES, "keepout_transform_xla": RES}[kind]
+  mask_res = KEEPOUT_MASK_RES[kind]
   transform = kind.startswith("keepout_transform")
   sets = [keepout_inputs(s, b, hw, n, mask_res, transform) for s in range(2)]
   state = jf.KeepoutState.create(b)
@@ -568,16 +570,14 @@ def main(argv=None) -> int:
 
   bw_fig = results.get("bandwidth", {})
   bw = bw_fig.get("roofline_bytes_per_s", bw_fig.get("throughput"))
-  for name in ("keepout_aligned", "keepout_aligned_pallas", "keepout_other_res", "keepout_transform",
-               "keepout_transform_xla", "pipeline"):
+  base = results.get("baseline_keepout", {}).get("throughput")
+  for name in KEEPOUT_FIGURES:
     r = results.get(name)
-    if r and "throughput" in r and bw and name != "pipeline":
+    if r and "throughput" in r and bw:
       r["roofline_pct"] = 100.0 * r["throughput"] * 3 / bw
-    base = results.get("baseline_keepout", {}).get("throughput")
-    if r and "throughput" in r and base and name.startswith("keepout"):
+    if r and "throughput" in r and base:
       r["speedup_vs_numpy"] = r["throughput"] / base
-  for name in ("keepout_aligned", "keepout_aligned_pallas", "keepout_other_res", "keepout_transform",
-               "keepout_transform_xla", "baseline_keepout"):
+  for name in (*KEEPOUT_FIGURES, "baseline_keepout"):
     r = results.get(name)
     peer = (r or {}).get("cpp_peer", {})
     if "throughput" in (r or {}) and "throughput" in peer:

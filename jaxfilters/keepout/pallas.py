@@ -93,12 +93,10 @@ class PallasTuning:
   def __post_init__(self):
     if self.layout not in LAYOUTS:
       raise ValueError(f"PallasTuning.layout must be one of {LAYOUTS}; got {self.layout!r}")
-    for name, ok, want in (
-        ("block_cells", lambda v: 16 <= v <= 65536 and v & (v - 1) == 0, "a power of two in [16, 65536]"),
-        ("frame_block_cells", lambda v: 16 <= v <= 65536 and v & (v - 1) == 0, "a power of two in [16, 65536]"),
-        ("num_warps", lambda v: v in (1, 2, 4, 8, 16, 32), "one of 1, 2, 4, 8, 16, 32"),
-        ("frame_num_warps", lambda v: v in (1, 2, 4, 8, 16, 32), "one of 1, 2, 4, 8, 16, 32"),
-        ("num_stages", lambda v: 1 <= v <= 8, "an int in [1, 8]")):
+    cells = (lambda v: 16 <= v <= 65536 and v & (v - 1) == 0, "a power of two in [16, 65536]")
+    warps = (lambda v: v in (1, 2, 4, 8, 16, 32), "one of 1, 2, 4, 8, 16, 32")
+    for name, (ok, want) in (("block_cells", cells), ("frame_block_cells", cells), ("num_warps", warps),
+                             ("frame_num_warps", warps), ("num_stages", (lambda v: 1 <= v <= 8, "an int in [1, 8]"))):
       v = getattr(self, name)
       if isinstance(v, (bool, np.bool_)) or not isinstance(v, (int, np.integer)) or not ok(int(v)):
         raise ValueError(f"PallasTuning.{name} must be {want}; got {v!r}")
