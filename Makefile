@@ -26,9 +26,9 @@ demo: $(BASE_STAMP)
 	$(VENV)/bin/jaxfilters fleet --out out/demo
 
 # The README's picture is the demo's: run the demo, then copy its trajectories.png with the
-# numbers it shows (sims/scripts/readme_picture.py); commit docs/demo.png afterwards.
+# numbers it shows (sims/commands/readme_picture.py); commit docs/demo.png afterwards.
 readme-picture: demo
-	$(PY) -m sims.scripts.readme_picture out/demo docs/demo.png
+	$(PY) -m sims.commands.readme_picture out/demo docs/demo.png
 
 # Two worker processes, each taking whole files (their shared compiled fixtures stay in one process).
 test: $(TEST_STAMP)

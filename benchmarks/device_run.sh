@@ -50,7 +50,7 @@ fi
 
 if [ "${SOAK:-1}" = 1 ]; then
   echo "== soak: fleet env steps in chunks (NaN, keepout, speed, device memory) -> $OUT/soak.log"
-  timeout "${SOAK_TIMEOUT:-150}" python3 -m sims.scripts.soak --worlds "${SOAK_WORLDS:-1024}" --robots-per-world 8 \
+  timeout "${SOAK_TIMEOUT:-150}" python3 -m sims.commands.soak --worlds "${SOAK_WORLDS:-1024}" --robots-per-world 8 \
     --chunk-steps 50 --chunks "${SOAK_CHUNKS:-10}" > "$OUT/soak.log" 2>&1
   echo "soak rc=$?"; grep -v '^ ' "$OUT/soak.log" | tail -n 6
 fi

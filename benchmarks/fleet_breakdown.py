@@ -11,7 +11,7 @@ is a difference of two measured figures:
 
 | variant | what runs per robot |
 | --- | --- |
-| bare_mjx | `sims.bench.bare_mjx_rollout`: vmapped mjx.step only (the baseline) |
+| bare_mjx | `sims.scale.bench.bare_mjx_rollout`: vmapped mjx.step only (the baseline) |
 | physics | the fleet loop (20 Hz ticks of 5 physics steps) at a constant twist; no filters, no metrics |
 | metrics | + the per-physics-step metrics (zone, keepout, distance) and the per-tick proximity check |
 | speed_clip | + speed filter, goals, progress checker, recovery and the clip; the planner's command is a constant twist |
@@ -53,9 +53,10 @@ import jax  # noqa: E402
 import jax.numpy as jnp  # noqa: E402
 
 from reference import planner as planner_reference  # noqa: E402
-from sims import bench, navigation, planner  # noqa: E402
-from sims.config import FleetConfig  # noqa: E402
-from sims.env import FleetEnv, WorldState, mjx_step  # noqa: E402
+from sims.scale import bench
+from sims.fleet import navigation, planner  # noqa: E402
+from sims.fleet.config import FleetConfig  # noqa: E402
+from sims.fleet.env import FleetEnv, WorldState, mjx_step  # noqa: E402
 
 _F32 = jnp.float32
 _TWIST = (0.4, 0.3)   # m/s, rad/s: the constant command of the variants without a planner (as bare_mjx)
@@ -153,13 +154,13 @@ def _const_value_and_direction(field, goal, xy):
 
 
 # Planner lookups a variant replaces by constants: (module, attribute, replacement). Attributes that a
-# version of sims/planner.py lacks are skipped (and listed in the variant's result).
+# version of sims/fleet/planner.py lacks are skipped (and listed in the variant's result).
 _LOOKUPS = {
     "costmap": [(planner, "lut_at", _const_lut)],
     "speed": [(planner, "speed_cap_xy", _const_speed_xy)],
     "nav": [(navigation, "nav_value", _const_nav_value), (navigation, "descent_direction", _const_descent),
             (navigation, "value_and_direction", _const_value_and_direction)],
-    # Not lookups: the ways sims/planner.py can run the candidates (its default depends on the backend).
+    # Not lookups: the ways sims/fleet/planner.py can run the candidates (its default depends on the backend).
     "rollout_cumsum": [(planner, "rollout_mode", lambda: "cumsum")],
     "rollout_chain": [(planner, "rollout_mode", lambda: "chain")],
     "rollout_fused": [(planner, "rollout_mode", lambda: "fused")],

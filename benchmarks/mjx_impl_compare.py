@@ -22,7 +22,7 @@ def main(argv=None) -> int:
   parser.add_argument("--impls", default="jax,warp")
   parser.add_argument("--out")
   args = parser.parse_args(argv)
-  from sims.bench import fleet_throughput  # noqa: PLC0415 - after argument parsing
+  from sims.scale.bench import fleet_throughput  # noqa: PLC0415 - after argument parsing
 
   results = {}
   for impl in args.impls.split(","):

@@ -3,7 +3,7 @@
     python -m benchmarks.ppo_scaling --num-envs 65536 262144 --devices 4 --json --out ppo_scaling.json
 
 For each --num-envs N: `jaxfilters rl train --randomize`'s training call
-(`sims.ppo.train_program`: rejax PPO, the env batch sharded over D devices with
+(`sims.rl.ppo.train_program`: rejax PPO, the env batch sharded over D devices with
 the per-device minibatch shuffle) is compiled for D = --devices and for one
 device, then timed: one warm-up call and --calls timed calls of --iters PPO
 iterations (N envs x --num-steps steps each). Agent env-steps per second are
@@ -31,7 +31,7 @@ import jax
 
 
 def _time_program(algo, mesh, calls: int) -> dict:
-  from sims.ppo import replicas_identical, train_program
+  from sims.rl.ppo import replicas_identical, train_program
   t0 = time.perf_counter()
   ts, train = train_program(algo, jax.random.PRNGKey(0), mesh)
   compiled = train.lower(ts).compile()
@@ -61,10 +61,10 @@ def main(argv=None) -> int:
   ap.add_argument("--out", default=None)
   args = ap.parse_args(argv)
 
-  from sims import sharding
-  from sims.ppo import GymnaxAdapter, make_ppo
-  from sims.randomization import training_env
-  from sims.rl import NavEnvConfig
+  from sims.scale import sharding
+  from sims.rl.ppo import GymnaxAdapter, make_ppo
+  from sims.rl.randomization import training_env
+  from sims.rl.env import NavEnvConfig
 
   for name in ("num_steps", "minibatches", "iters", "calls", "layouts"):
     if getattr(args, name) < 1:

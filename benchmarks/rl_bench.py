@@ -11,10 +11,10 @@ Figures (each with `compile_s` apart from the steady state, the device named):
   100 Hz and the observation).
 * `policy_loop`: the same with a 2 x 64 tanh MLP (rejax's PPO actor, random
   weights) choosing every action from the observation.
-* `ppo_train`: rejax PPO (`sims.ppo.make_ppo`) training calls of N envs
+* `ppo_train`: rejax PPO (`sims.rl.ppo.make_ppo`) training calls of N envs
   x 64 steps; agent env-steps/s including the PPO updates.
 * `weak_scaling` / `strong_scaling`: `env_only` sharded over 1, 2, 4, ... of
-  the available devices (`sims.sharding`): N per device fixed, or N total
+  the available devices (`sims.scale.sharding`): N per device fixed, or N total
   fixed. Efficiency = throughput(d) / (d x throughput(1)) for weak, and
   throughput(d) / throughput(1) / d for strong.
 
@@ -61,7 +61,7 @@ def _best(fn, args, repeats):
 
 def _rollout(env, num_steps, policy=None, mesh=None):
   """jitted (states [N], params) -> states after num_steps of vmap(step)."""
-  from sims import sharding
+  from sims.scale import sharding
 
   def run(states, params):
     def body(s, _):
@@ -94,7 +94,7 @@ def _mlp(obs_size, action_size, key):
 
 
 def bench_env(env, n, steps, repeats, *, policy=False, mesh=None) -> dict:
-  from sims import sharding
+  from sims.scale import sharding
   reset, _ = sharding.rl_batch_fns(env, mesh)
   keys = jax.random.split(jax.random.PRNGKey(0), n)
   if mesh is not None:
@@ -120,7 +120,7 @@ def bench_env(env, n, steps, repeats, *, policy=False, mesh=None) -> dict:
 
 
 def bench_ppo(env, n, num_steps, calls) -> dict:
-  from sims.ppo import GymnaxAdapter, make_ppo
+  from sims.rl.ppo import GymnaxAdapter, make_ppo
   adapter = GymnaxAdapter(env, episode_length=200)
   algo = make_ppo(adapter, timesteps_per_call=n * num_steps, num_envs=n, num_steps=num_steps,
                   num_minibatches=4 if n * num_steps >= 64 else 1)
@@ -148,8 +148,8 @@ def main(argv=None) -> int:
   ap.add_argument("--out", default=None, help="also write the JSON report to this file")
   ap.add_argument("--only", default=None, help="comma list of env_only,policy_loop,ppo_train,scaling")
   args = ap.parse_args(argv)
-  from sims import sharding
-  from sims.rl import NavEnv
+  from sims.scale import sharding
+  from sims.rl.env import NavEnv
   dev = jax.devices()
   sz = _sizes(args.quick, dev[0].platform)
   only = set(args.only.split(",")) if args.only else {"env_only", "policy_loop", "ppo_train", "scaling"}

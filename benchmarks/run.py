@@ -449,10 +449,10 @@ def bench_baseline_speed(sz, b):
 
 def bench_fleet(sz, b):
   try:
-    from sims import bench as sims_bench
+    from sims.scale import bench as sims_bench
     fn = sims_bench.fleet_throughput
   except Exception as e:  # noqa: BLE001 - reported, not raised
-    return dict(name="fleet", error=f"sims.bench.fleet_throughput unavailable: {type(e).__name__}: {e}")
+    return dict(name="fleet", error=f"sims.scale.bench.fleet_throughput unavailable: {type(e).__name__}: {e}")
   out = dict(name="fleet", signature=str(inspect.signature(fn)),
              params=dict(num_robots=b, num_steps=sz["fleet_steps"], impl="jax"))
   for key, filters in (("filters_on", True), ("bare_mjx", False)):

@@ -6,7 +6,7 @@
 Commands come from two places: the library's own (`query`, `jaus`, listed in
 `_BUILTIN`) and any installed package that registers a function under the
 entry-point group `jaxfilters.commands` (the simulator registers `fleet` and
-`bench` from `sims/scripts`; the library never imports the simulator). Each
+`bench` from `sims/commands`; the library never imports the simulator). Each
 registered function receives argparse's subparsers object, adds its parser
 and sets `func` (a callable `args -> int`) as a default; a command that passes
 unknown options through to another program also sets `passthrough` to the name

@@ -1,11 +1,11 @@
 """The fleet planner in its straightforward form, kept as a reference for the optimised one.
 
-sims/planner.py and sims/navigation.py share work between candidates, pack
+sims/fleet/planner.py and sims/fleet/navigation.py share work between candidates, pack
 the costmap rules into one table and gather through flat indices;
 tests/test_fleet_perf.py checks that they choose the same commands with the
 same scores as this straightforward version (and the navigation field lookups
 below), and benchmarks/fleet_breakdown.py times it as the `reference_planner`
-variant. It shares no code with sims/planner.py.
+variant. It shares no code with sims/fleet/planner.py.
 """
 
 from __future__ import annotations
@@ -15,7 +15,7 @@ import jax.numpy as jnp
 import numpy as np
 
 from jaxfilters import constants
-from sims.config import FleetConfig
+from sims.fleet.config import FleetConfig
 
 _F32 = jnp.float32
 _SPEED_PENALTY = 1e3

@@ -8,29 +8,39 @@ runs, per robot: speed filter -> navigation field -> local planner on a
 rolling local costmap (static layer, other robots, inflation, keepout filter)
 -> clip to the speed limit -> mjx.step, and accumulates compliance metrics.
 
+The packages, each a room with one concern (docs/house.md draws them):
+
+* `sims.fleet`: the simulated fleet (config, scenario, layouts, world, navigation, planner,
+  local costmap, metrics, env). Imports `jaxfilters` only.
+* `sims.scale`: device meshes and throughput benchmarks. Imports `sims.fleet`.
+* `sims.rl`: the RL env (Playground contract), PPO, policy files, Gymnasium. Imports
+  `sims.fleet` and `sims.scale`.
+* `sims.record`: rosbag2/MCAP bags and pictures. Imports `sims.fleet`.
+* `sims.tuning`: zone parameters tuned with `jax.grad`. Imports `sims.fleet`.
+* `sims.commands`: the `jaxfilters fleet | bench | rl` commands and the scripts, on top of all.
+
 `sims` imports `jaxfilters`; `jaxfilters` never imports `sims`. The public
 names below are imported lazily, so a command can set XLA options before
-JAX starts.
+JAX starts, and `import sims` imports neither Gymnasium nor MuJoCo Playground.
 
-The fleet library is the modules of this package; its entry points (the
-`fleet` and `bench` commands and the scripts) live in `sims/scripts/`.
-`NavGymEnv` and `NavVectorEnv` (Gymnasium interfaces to the RL env) need the
-`rl` extra; `import sims` imports neither Gymnasium nor MuJoCo Playground.
-`sims/quiet_mjx.py` says how the two lines mujoco.mjx prints without
-warp-lang are kept off the screen.
+The flat module paths of earlier releases (`sims.config`, `sims.env`, `sims.gym_env`,
+`sims.scripts.fleet`, ...) moved into these packages; CHANGELOG.md lists each old path
+with its new one. Importing `sims` installs no import hook.
 """
 
 import importlib
 
 _EXPORTS = {
-    "FleetConfig": "sims.config", "PlannerConfig": "sims.config", "RobotConfig": "sims.config",
-    "FleetEnv": "sims.env", "Frame": "sims.env", "Rollout": "sims.env", "WorldState": "sims.env",
-    "Metrics": "sims.metrics", "summarize": "sims.metrics",
-    "NavField": "sims.navigation", "distance_field": "sims.navigation",
-    "Scenario": "sims.scenario",
-    "World": "sims.world", "WorldParams": "sims.world", "build_world": "sims.world",
-    "fleet_throughput": "sims.bench",
-    "NavGymEnv": "sims.gym_env", "NavVectorEnv": "sims.gym_env",
+    "FleetConfig": "sims.fleet.config", "PlannerConfig": "sims.fleet.config",
+    "RobotConfig": "sims.fleet.config",
+    "FleetEnv": "sims.fleet.env", "Frame": "sims.fleet.env", "Rollout": "sims.fleet.env",
+    "WorldState": "sims.fleet.env",
+    "Metrics": "sims.fleet.metrics", "summarize": "sims.fleet.metrics",
+    "NavField": "sims.fleet.navigation", "distance_field": "sims.fleet.navigation",
+    "Scenario": "sims.fleet.scenario",
+    "World": "sims.fleet.world", "WorldParams": "sims.fleet.world", "build_world": "sims.fleet.world",
+    "fleet_throughput": "sims.scale.bench",
+    "NavGymEnv": "sims.rl.gym", "NavVectorEnv": "sims.rl.gym",
 }
 __all__ = sorted(_EXPORTS)
 

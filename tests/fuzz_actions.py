@@ -1,4 +1,4 @@
-"""Fuzz target for the Gymnasium envs' host-side action check (`sims.gym_env.check_actions`).
+"""Fuzz target for the Gymnasium envs' host-side action check (`sims.rl.gym.check_actions`).
 
 An input is either `J` + JSON text (nested lists of numbers, what a user passes as a Python list)
 or `B` + one dtype byte + raw bytes (a NumPy array of that dtype, 2 columns where the length
@@ -19,7 +19,7 @@ DTYPES = (np.float64, np.float32, np.float16, np.int32, np.int64, np.uint8, np.b
 
 def run(data: bytes) -> None:
   """Checks one input; ValueError for a rejected action, AssertionError if an accepted one is bad."""
-  from sims.gym_env import check_actions
+  from sims.rl.gym import check_actions
   if data[:1] == b"J":
     obj = json.loads(data[1:].decode("utf-8"))
   elif data[:1] == b"B" and len(data) >= 2:

@@ -1,4 +1,4 @@
-"""Fuzz targets for policy folders: mutated `policy.json` and `policy.msgpack` through `sims.policy.load_policy`.
+"""Fuzz targets for policy folders: mutated `policy.json` and `policy.msgpack` through `sims.rl.policy.load_policy`.
 
 Registered in tests/fuzz_inputs.py as "policy-json" (the JSON mutated beside a valid msgpack) and
 "policy-msgpack" (the msgpack mutated beside a valid JSON), so they run in the same sandboxed
@@ -29,8 +29,8 @@ from pathlib import Path
 import numpy as np
 from flax import serialization
 
-from sims import policy as P
-from sims.rl import NavEnvConfig   # imported before the fuzz workers' memory limit is set
+from sims.rl import policy as P
+from sims.rl.env import NavEnvConfig   # imported before the fuzz workers' memory limit is set
 
 _ARCHS = (((4,), 98, 2), ((3, 5), 98, 2))
 
@@ -44,7 +44,7 @@ def _meta(hidden, obs, act) -> dict:
 
 def random_tree(hidden, obs, act, seed: int, *, var_floor: float = 0.1) -> dict:
   """A valid policy.msgpack tree with random weights (obs_var >= var_floor), shaped as
-  `sims.policy.param_shapes` says; also the CLI tests' policy folders."""
+  `sims.rl.policy.param_shapes` says; also the CLI tests' policy folders."""
   rng = np.random.default_rng(seed)
   tree: dict = {}
   for path, shape in P.param_shapes(hidden, obs, act).items():

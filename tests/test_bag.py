@@ -14,10 +14,10 @@ mcap_reader = pytest.importorskip("mcap.reader")
 mcap_ros2 = pytest.importorskip("mcap_ros2.decoder")
 
 from jaxfilters.map_io import load_map  # noqa: E402
-from sims import bag as bag_lib  # noqa: E402
-from sims.config import FleetConfig  # noqa: E402
-from sims.env import FleetEnv  # noqa: E402
-from sims.scenario import ASSETS, Scenario  # noqa: E402
+from sims.record import bag as bag_lib  # noqa: E402
+from sims.fleet.config import FleetConfig  # noqa: E402
+from sims.fleet.env import FleetEnv  # noqa: E402
+from sims.fleet.scenario import ASSETS, Scenario  # noqa: E402
 
 ROBOTS_PER_WORLD = 3
 WORLDS = 2
@@ -200,7 +200,7 @@ def test_foxglove_layout_names_only_topics_the_bag_has(run):
 
 
 def test_bag_picture_reads_the_bag(run, tmp_path):
-  from sims import bag_view
+  from sims.record import bag_view
   *_, path = run
   out = bag_view.render_bag_png(path, tmp_path / "bag.png")
   assert out.stat().st_size > 10_000

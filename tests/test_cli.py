@@ -72,7 +72,7 @@ def test_version_and_unknown_command(capsys):
 
 
 def test_internal_error_is_one_line_with_code_1(monkeypatch, capsys, tmp_path):
-  from sims import env
+  from sims.fleet import env
   def boom(*a, **k):
     raise RuntimeError("simulated bug\nsecond line")
   monkeypatch.setattr(env.FleetEnv, "create", classmethod(lambda cls, *a, **k: boom()))
@@ -83,7 +83,7 @@ def test_internal_error_is_one_line_with_code_1(monkeypatch, capsys, tmp_path):
 
 
 def test_rule_violation_exit_code_is_3(monkeypatch, tmp_path, capsys):
-  from sims import metrics
+  from sims.fleet import metrics
   real = metrics.summarize
   def violated(*a, **k):
     s = real(*a, **k)

@@ -126,7 +126,7 @@ def test_query_and_fleet_share_speed_defaults(tmp_path, capsys):
   poses.write_text("0.5,0.5\n")
   assert cli.main(["query", "--speed", str(ASSETS / "default_speed.yaml"), "--poses", str(poses)]) == 0
   row = json.loads(capsys.readouterr().out)
-  from sims.scenario import Scenario
+  from sims.fleet.scenario import Scenario
   sc = Scenario.load(ASSETS / "default_map.yaml", ASSETS / "default_keepout.yaml", ASSETS / "default_speed.yaml",
                      speed_type=cli.SPEED_TYPE_DEFAULT, speed_base=cli.SPEED_BASE_DEFAULT,
                      speed_multiplier=cli.SPEED_MULTIPLIER_DEFAULT)

@@ -7,7 +7,7 @@ import json
 import pytest
 
 from benchmarks import fleet_breakdown as fb
-from sims import navigation, planner
+from sims.fleet import navigation, planner
 
 
 def _r(ns, **kw):
@@ -41,7 +41,7 @@ def test_patches_are_undone_and_missing_names_listed():
   try:
     del planner.lut_at
     with fb.patched_lookups(("costmap",)) as missing:
-      assert missing == ["sims.planner.lut_at"]
+      assert missing == ["sims.fleet.planner.lut_at"]
   finally:
     planner.lut_at = saved
 

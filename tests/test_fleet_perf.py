@@ -23,9 +23,9 @@ import pytest
 
 from jaxfilters import constants
 from jaxfilters.keepout import KeepoutState
-from sims import local_costmap, navigation, planner
-from sims.config import FleetConfig, PlannerConfig
-from sims.env import FleetEnv
+from sims.fleet import local_costmap, navigation, planner
+from sims.fleet.config import FleetConfig, PlannerConfig
+from sims.fleet.env import FleetEnv
 from reference import planner as ref
 
 K = 6   # robots per cluster (one local costmap build)

@@ -1,4 +1,4 @@
-"""sims/gym_env.py: Gymnasium's env checker on NavGymEnv; NavVectorEnv's spaces, seeding, time limit,
+"""sims/rl/gym.py: Gymnasium's env checker on NavGymEnv; NavVectorEnv's spaces, seeding, time limit,
 terminals, same-step auto-reset, input checks and per-episode randomisation.
 
 One NavEnv serves every env here, and each wrapper compiles once (module fixtures): a single env
@@ -21,8 +21,8 @@ from gymnasium.utils.env_checker import check_env
 from gymnasium.vector import AutoresetMode
 
 from jaxfilters import constants
-from sims.gym_env import OBS_BOUND, NavGymEnv, NavVectorEnv
-from sims.rl import NavEnv
+from sims.rl.gym import OBS_BOUND, NavGymEnv, NavVectorEnv
+from sims.rl.env import NavEnv
 
 N, T = 3, 4
 LETHAL = constants.INSCRIBED_INFLATED_OBSTACLE

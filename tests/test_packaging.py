@@ -48,7 +48,7 @@ def test_extras_are_named_for_what_they_bring():
 
 def test_bench_outside_a_checkout_is_a_one_line_usage_error(monkeypatch, capsys):
   monkeypatch.setenv("XLA_FLAGS", os.environ.get("XLA_FLAGS", ""))
-  from sims.scripts import bench as sims_bench
+  from sims.commands import bench as sims_bench
   monkeypatch.setattr(sims_bench, "harness_root", lambda: None)
   monkeypatch.setattr(sims_bench.importlib.util, "find_spec", lambda name: None)
   assert cli.main(["bench", "--quick"]) == cli.EXIT_USAGE
@@ -57,7 +57,7 @@ def test_bench_outside_a_checkout_is_a_one_line_usage_error(monkeypatch, capsys)
 
 
 def test_harness_is_found_beside_the_sims_package():
-  from sims.scripts import bench as sims_bench
+  from sims.commands import bench as sims_bench
   assert sims_bench.harness_root() == ROOT
 
 
@@ -75,7 +75,7 @@ sys.meta_path.insert(0, _NoWarp())
 @pytest.mark.parametrize("warp", ["absent", "as installed"])
 def test_importing_the_simulator_prints_nothing(warp):
   code = (_BLOCK_WARP if warp == "absent" else "") + (
-      "import sims.env, sims.bench, sims, sims.quiet_mjx as q, mujoco.mjx.warp as w\n"
+      "import sims.fleet.env, sims.scale.bench, sims, sims.fleet.quiet_mjx as q, mujoco.mjx.warp as w\n"
       "print('kept', len(q.WARP_MESSAGES), 'warp', w.WARP_INSTALLED)")
   proc = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=120, cwd=ROOT,
                         env=dict(os.environ, PYTHONPATH=str(ROOT)))
@@ -90,7 +90,7 @@ def test_importing_the_simulator_prints_nothing(warp):
 
 
 def test_unexpected_mjx_import_messages_pass_through(capsys, monkeypatch):
-  from sims import quiet_mjx
+  from sims.fleet import quiet_mjx
   monkeypatch.setattr(quiet_mjx, "WARP_MESSAGES", [])
   quiet_mjx.pass_through_unexpected("Failed to import warp: CUDA driver version is insufficient\n")
   assert capsys.readouterr().out == "Failed to import warp: CUDA driver version is insufficient\n"
@@ -98,16 +98,18 @@ def test_unexpected_mjx_import_messages_pass_through(capsys, monkeypatch):
 
 
 def test_importing_sims_installs_no_import_hook():
-  code = ("import sys; before = list(sys.meta_path); import sims, sims.config; "
+  code = ("import sys; before = list(sys.meta_path); import sims, sims.fleet.config; "
           "print(sys.meta_path == before)")
   proc = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=120, cwd=ROOT,
                         env=dict(os.environ, PYTHONPATH=str(ROOT)))
   assert proc.returncode == 0 and proc.stdout.strip() == "True", proc.stderr[-2000:]
 
 
-def test_every_entry_point_lives_in_sims_scripts():
-  """The library modules of sims hold no `__main__` block; the commands are registered from sims/scripts."""
-  for path in sorted((ROOT / "sims").glob("*.py")):
+def test_every_entry_point_lives_in_sims_commands():
+  """The library modules of sims hold no `__main__` block; the commands are registered from sims/commands."""
+  for path in sorted((ROOT / "sims").rglob("*.py")):
+    if path.parent.name == "commands":
+      continue
     assert "__main__" not in path.read_text(), path
   commands = PYPROJECT["project"]["entry-points"]["jaxfilters.commands"]
-  assert all(v.startswith("sims.scripts.") for v in commands.values()), commands
+  assert all(v.startswith("sims.commands.") for v in commands.values()), commands

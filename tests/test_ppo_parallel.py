@@ -1,4 +1,4 @@
-"""The block minibatch shuffle of PPO over several devices (`sims.ppo.BlockShufflePPO`).
+"""The block minibatch shuffle of PPO over several devices (`sims.rl.ppo.BlockShufflePPO`).
 
 Each device's samples stay on the device: minibatch m takes an equal slice of every
 device's block, and the whole iteration is still a permutation of the batch.
@@ -11,7 +11,7 @@ import pytest
 
 rejax = pytest.importorskip("rejax", reason="the rl extra (rejax) is not installed")
 
-from sims.ppo import BlockShufflePPO
+from sims.rl.ppo import BlockShufflePPO
 
 
 def _algo(num_envs, num_steps, num_minibatches, blocks):

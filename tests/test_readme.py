@@ -70,10 +70,10 @@ def test_readme_starts_with_its_title_and_the_two_commands():
 
 
 def test_readme_picture_is_the_make_demo_run():
-  """docs/demo.png was written by sims/scripts/readme_picture.py from a run with the demo's defaults."""
+  """docs/demo.png was written by sims/commands/readme_picture.py from a run with the demo's defaults."""
   from PIL import Image
 
-  from sims.scripts import readme_picture
+  from sims.commands import readme_picture
   with Image.open(REPO / "docs" / "demo.png") as im:
     text = json.loads(im.text[readme_picture.TEXT_KEY])
   want = readme_picture.demo_defaults()

@@ -1,4 +1,4 @@
-"""sims/render.py: zones land at their world place, labels name every zone, files stay small.
+"""sims/record/render.py: zones land at their world place, labels name every zone, files stay small.
 
 Pixel checks render the figure to an array (Agg canvas) and read the colour at
 the map axes' data -> pixel transform of a world point, against the colour
@@ -14,10 +14,10 @@ from matplotlib.colors import to_rgb
 from PIL import Image
 
 from jaxfilters.grid import OccupancyGrid
-from sims import render
-from sims.config import FleetConfig
-from sims.scenario import Scenario
-from sims.world import build_world
+from sims.record import render
+from sims.fleet.config import FleetConfig
+from sims.fleet.scenario import Scenario
+from sims.fleet.world import build_world
 
 
 @pytest.fixture(scope="module")

@@ -1,4 +1,4 @@
-"""sims/rl.py: the Playground contract, the speed clip, keepout/collision episodes, goals,
+"""sims/rl/env.py: the Playground contract, the speed clip, keepout/collision episodes, goals,
 navigation mode against FleetEnv, Brax/Playground wrappers with zone and goal randomisation,
 a few rejax PPO iterations, and the soak script.
 
@@ -18,10 +18,10 @@ import pytest
 from mujoco_playground._src import mjx_env, wrapper
 
 from jaxfilters import constants
-from sims.scripts import soak
-from sims.config import FleetConfig
-from sims.randomization import randomize_zones_and_goals
-from sims.rl import NavEnv, NavEnvConfig, clip_command
+from sims.commands import soak
+from sims.fleet.config import FleetConfig
+from sims.rl.randomization import randomize_zones_and_goals
+from sims.rl.env import NavEnv, NavEnvConfig, clip_command
 
 TOL = FleetConfig().speed_tolerance
 
@@ -334,7 +334,7 @@ def test_brax_wrappers_with_zone_and_goal_randomisation():
 
 
 def test_ppo_iterations_train_the_policy():
-  from sims.ppo import GymnaxAdapter, evaluate_policy, make_ppo, mean_policy
+  from sims.rl.ppo import GymnaxAdapter, evaluate_policy, make_ppo, mean_policy
   env = NavEnv.create()
   adapter = GymnaxAdapter(env, episode_length=6)
   algo = make_ppo(adapter, timesteps_per_call=3 * 4 * 8, num_envs=4, num_steps=8, num_epochs=2,
@@ -364,7 +364,7 @@ def test_soak_short():
 def test_adapter_randomises_each_env_model():
   # The adapter once paired the randomised leaves with the wrong model fields (mjx.Model's None
   # fields shifted the flattened lists): `train_ppo --randomize` stopped at the first reset.
-  from sims.ppo import GymnaxAdapter
+  from sims.rl.ppo import GymnaxAdapter
   env = NavEnv.create()
   adapter = GymnaxAdapter(env, episode_length=4, randomization_fn=randomize_zones_and_goals)
   reset = jax.jit(jax.vmap(adapter.reset))

@@ -28,7 +28,7 @@ import numpy as np
 import pytest
 
 from jaxfilters import cli
-from sims import policy as P
+from sims.rl import policy as P
 
 REPO = Path(__file__).resolve().parents[1]
 ASSETS = REPO / "sims" / "assets"
@@ -55,7 +55,7 @@ def rl_entry_point(tmp_path_factory) -> str:
   info = root / "jaxfilters_rl_checkout-0.dist-info"
   info.mkdir()
   (info / "METADATA").write_text("Metadata-Version: 2.1\nName: jaxfilters-rl-checkout\nVersion: 0\n")
-  (info / "entry_points.txt").write_text(f"[{cli.ENTRY_POINT_GROUP}]\nrl = sims.scripts.rl:register_rl\n")
+  (info / "entry_points.txt").write_text(f"[{cli.ENTRY_POINT_GROUP}]\nrl = sims.commands.rl:register_rl\n")
   sys.path.insert(0, str(root))
   importlib.invalidate_caches()
   yield str(root)
@@ -173,7 +173,7 @@ def write_policy(folder: Path, *, hidden=(4,), obs=98, act=2, meta_edit=None, tr
   """A valid policy folder with random weights (no training), optionally edited."""
   from flax import serialization
 
-  from sims.rl import NavEnvConfig
+  from sims.rl.env import NavEnvConfig
   from tests.fuzz_policy import random_tree
   tree = random_tree(hidden, obs, act, seed, var_floor=0.5)
   meta = {"format": P.FORMAT, "version": P.VERSION, "hidden_sizes": list(hidden), "activation": "tanh",
@@ -260,7 +260,7 @@ def test_help_texts_have_examples_exit_codes_and_every_option_explained(rl_entry
 
 
 def test_out_folder_of_an_earlier_run_is_accepted(tmp_path):
-  from sims.scripts.rl import check_out_dir
+  from sims.commands.rl import check_out_dir
   write_policy(tmp_path / "pol")
   (tmp_path / "pol" / "results.json").write_text("{}")
   check_out_dir(tmp_path / "pol", overwrite=False)               # an earlier run's files only
@@ -274,8 +274,8 @@ def test_out_folder_of_an_earlier_run_is_accepted(tmp_path):
 
 
 def test_save_load_round_trip_acts_like_the_train_state(tmp_path):
-  from sims.ppo import GymnaxAdapter, make_ppo, mean_policy
-  from sims.randomization import training_env
+  from sims.rl.ppo import GymnaxAdapter, make_ppo, mean_policy
+  from sims.rl.randomization import training_env
   env, _ = training_env(None, randomize=False, seed=0)
   adapter = GymnaxAdapter(env, 6)
   algo = make_ppo(adapter, timesteps_per_call=32, num_envs=4, num_steps=8, hidden=(16, 8))

@@ -1,4 +1,4 @@
-"""Random zone layouts (sims/layouts.py) and the RL env driving in them (sims/rl.py `layouts=`).
+"""Random zone layouts (sims/fleet/layouts.py) and the RL env driving in them (sims/rl/env.py `layouts=`).
 
 One env with three layouts (the built-in warehouse's own zones first) is built once; its reset
 and step are compiled once with the model as an argument, so every layout runs the same program.
@@ -12,11 +12,11 @@ import numpy as np
 import pytest
 
 from jaxfilters import constants
-from sims import navigation
-from sims.layouts import LayoutConfig, layout_scenarios, random_layout
-from sims.randomization import randomize_zones_and_goals
-from sims.rl import NavEnv, NavEnvConfig
-from sims.scenario import Scenario
+from sims.fleet import navigation
+from sims.fleet.layouts import LayoutConfig, layout_scenarios, random_layout
+from sims.rl.randomization import randomize_zones_and_goals
+from sims.rl.env import NavEnv, NavEnvConfig
+from sims.fleet.scenario import Scenario
 
 
 def _cell_xy(grid, row, col):
@@ -146,8 +146,8 @@ def test_stations_and_spawns_keep_off_a_free_map_edge():
   # A map whose free space runs to its edge (Nav2's warehouse does at its bottom row) had stations and
   # spawn points a few cm from the edge: a robot started there left the map in its first step.
   from jaxfilters.grid import OccupancyGrid
-  from sims.config import FleetConfig
-  from sims.world import build_world
+  from sims.fleet.config import FleetConfig
+  from sims.fleet.world import build_world
   free = OccupancyGrid.create(np.zeros((160, 200), np.int8), 0.05, (-5.0, -4.0, 0.0))
   sc = Scenario(name="open", map=free, keepout=free, speed=free)
   cfg = FleetConfig(robots_per_world=2, num_stations=8)

@@ -1,4 +1,4 @@
-"""sims/sharding.py: sharded rollouts equal unsharded ones; `jaxfilters fleet --devices`; two processes.
+"""sims/scale/sharding.py: sharded rollouts equal unsharded ones; `jaxfilters fleet --devices`; two processes.
 
 The test process has already started JAX with one CPU device, so every check
 runs in a fresh subprocess with XLA_FLAGS=--xla_force_host_platform_device_count=4:
@@ -39,9 +39,9 @@ from jaxfilters import xla_flags
 xla_flags.use_fast_cpu_compile()
 import contextlib, io, json, sys
 import jax, jax.numpy as jnp, numpy as np
-from sims import sharding
-from sims.config import FleetConfig
-from sims.env import FleetEnv
+from sims.scale import sharding
+from sims.fleet.config import FleetConfig
+from sims.fleet.env import FleetEnv
 
 assert len(jax.devices()) == {DEVICES}, jax.devices()
 out = {{}}
@@ -65,7 +65,7 @@ out["shard_shape"] = list(states.goal.addressable_shards[0].data.shape)
 out["nonzero_goals"] = int(ref["goals_reached"].sum() + (ref["frame_goal"] != ref["frame_goal"][:1]).sum())
 
 # The RL env: reset and 3 steps of vmap(step), sharded over 4 devices vs unsharded.
-from sims.rl import NavEnv
+from sims.rl.env import NavEnv
 rl = NavEnv.create()
 rkeys = jax.random.split(jax.random.PRNGKey(1), 8)
 acts = jnp.tile(jnp.asarray([[1.0, 0.3]]), (8, 1))
@@ -92,8 +92,8 @@ def collectives(compiled):
   return sorted({{f"{{kind}} {{shape[:40]}}" for shape, kind in found}})
 out["fleet_collectives"] = collectives(env.rollout_fn({STEPS}, mesh=mesh).lower(env.params, s0).compile())
 # The RL env's reset in its randomised training layouts (drawn spawn points), run at every auto-reset.
-from sims.randomization import training_env
-from sims.rl import NavEnvConfig
+from sims.rl.randomization import training_env
+from sims.rl.env import NavEnvConfig
 renv, _ = training_env(None, randomize=True, seed=0, layouts=1, config=NavEnvConfig())
 w = sharding.worlds_sharding(mesh)
 rk = jax.device_put(jax.random.split(jax.random.PRNGKey(2), 8), w)
@@ -182,7 +182,7 @@ def test_sharded_steps_move_no_batch_between_devices(single):
 def test_top_k_equals_lax_top_k_with_ties_and_infinities():
   import jax
   import jax.numpy as jnp
-  from sims import sharding
+  from sims.scale import sharding
   rng = np.random.default_rng(0)
   for trial in range(60):
     n = int(rng.integers(1, 10))
@@ -229,7 +229,7 @@ def test_two_processes_jax_distributed(single, tmp_path):
   port = _free_port()
   procs = []
   for i in range(2):
-    cmd = [sys.executable, "-m", "sims.scripts.sharding", "--coordinator", f"127.0.0.1:{port}", "--num-processes", "2",
+    cmd = [sys.executable, "-m", "sims.commands.sharding", "--coordinator", f"127.0.0.1:{port}", "--num-processes", "2",
            "--process-id", str(i), "--worlds", str(WORLDS), "--steps", str(STEPS), "--robots-per-world", str(K),
            "--out", str(tmp_path / f"p{i}.npz")]
     procs.append(subprocess.Popen(cmd, env=_env(), cwd=ROOT, stdout=subprocess.PIPE, stderr=subprocess.PIPE,

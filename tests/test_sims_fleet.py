@@ -27,9 +27,9 @@ import pytest
 from PIL import Image
 
 from jaxfilters import cli
-from sims.config import FleetConfig
-from sims.env import FleetEnv
-from sims.scenario import Scenario
+from sims.fleet.config import FleetConfig
+from sims.fleet.env import FleetEnv
+from sims.fleet.scenario import Scenario
 
 CHUNK = 5          # env steps (of 0.2 s) per jitted call: 1 s simulated
 TOL = FleetConfig().speed_tolerance
@@ -258,9 +258,9 @@ def test_large_batch_does_not_deadlock():
   """
   code = textwrap.dedent("""
       import json, mujoco
-      from sims.bench import fleet_throughput
-      from sims.env import load_robot_model
-      from sims.config import FleetConfig
+      from sims.scale.bench import fleet_throughput
+      from sims.fleet.env import load_robot_model
+      from sims.fleet.config import FleetConfig
       m = load_robot_model(FleetConfig())
       assert m.opt.jacobian == mujoco.mjtJacobian.mjJAC_SPARSE
       bare = fleet_throughput(1280, 20, filters=False, repeats=1)

@@ -18,10 +18,10 @@ import numpy as np
 import pytest
 
 import jaxfilters as jf
-from sims import local_costmap, navigation, planner
-from sims.config import FleetConfig, PlannerConfig
-from sims.env import FleetEnv
-from sims.metrics import summarize
+from sims.fleet import local_costmap, navigation, planner
+from sims.fleet.config import FleetConfig, PlannerConfig
+from sims.fleet.env import FleetEnv
+from sims.fleet.metrics import summarize
 from reference import nav2 as reference
 from reference import planner as ref_planner
 

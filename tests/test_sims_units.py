@@ -21,10 +21,10 @@ from jaxfilters import constants
 from jaxfilters.grid import OccupancyGrid
 from jaxfilters.keepout import KeepoutState, occ_to_cost
 from jaxfilters.speed import speed_limit_at_one
-from sims import local_costmap, metrics as metrics_lib, navigation, planner
-from sims.config import FleetConfig, PlannerConfig, RobotConfig
-from sims.scenario import Scenario, speed_limit_host
-from sims.world import build_world, spaced_points
+from sims.fleet import local_costmap, metrics as metrics_lib, navigation, planner
+from sims.fleet.config import FleetConfig, PlannerConfig, RobotConfig
+from sims.fleet.scenario import Scenario, speed_limit_host
+from sims.fleet.world import build_world, spaced_points
 
 # ----------------------------------------------------------------------------- configs
 
@@ -241,7 +241,7 @@ def test_speed_cap_table_matches_speed_limit_at_one():
   """The planner's per-cell cap (before dilation) is speed_limit_at_one's limit in m/s."""
   sc = Scenario.default()
   world_cfg = FleetConfig()
-  from sims.world import zone_tables
+  from sims.fleet.world import zone_tables
   table, _, _, speeds = zone_tables(sc, world_cfg.robot.max_speed)
   speeds = np.asarray(speeds, np.float32)
   data = sc.speed.data
@@ -344,7 +344,7 @@ def test_proximity_update_hand_built():
 
 def test_zone_and_keepout_lookups_on_default_maps():
   from jaxfilters.types import FilterInfo, FilterMask
-  from sims.world import zone_tables
+  from sims.fleet.world import zone_tables
   sc = Scenario.default()
   table, labels, _, _ = zone_tables(sc, 0.5)
   speed = FilterMask.create(sc.speed, FilterInfo.create(1, 100.0, -1.0))
@@ -376,7 +376,7 @@ def test_summarize_flags_violations():
 
 
 def test_default_scenario_files_are_small_and_reproducible(tmp_path):
-  from sims.scripts import make_default_scenario
+  from sims.commands import make_default_scenario
   shipped = Path(make_default_scenario.ASSETS)
   total = sum((shipped / f"default_{n}.{e}").stat().st_size for n in ("map", "keepout", "speed")
               for e in ("yaml", "pgm"))

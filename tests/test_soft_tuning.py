@@ -6,7 +6,7 @@ import jax.numpy as jnp
 import numpy as np
 import pytest
 
-from sims import soft_tuning as T
+from sims.tuning import corner_speed as T
 
 SCENARIO = T.CornerScenario()
 

@@ -18,7 +18,7 @@ from tests.compile_count import count_compiles
 import jaxfilters as jf
 from jaxfilters import speed as sp
 from jaxfilters.grid import OccupancyGrid
-from sims import metrics
+from sims.fleet import metrics
 
 KEEPOUT = jf.FilterInfo.create(0)
 

@@ -1,0 +1,27 @@
+"""Reinforcement learning on the fleet: MuJoCo Playground's env contract, PPO, policy files, Gymnasium.
+
+Rooms: `env` (NavEnv, NavEnvConfig, NavModel: Playground's MjxEnv), `task` (NavTask, the data every
+step reads), `kernels` (the env's per-step kernels), `randomization` (zones and goals drawn per
+env), `adapter` (the env as a gymnax environment for rejax), `ppo` (training and evaluation),
+`policy` (policy files), `gym` (Gymnasium's Env and VectorEnv; needs the `rl` extra).
+
+Imports: `jaxfilters`, `sims.fleet`, `sims.scale` and this package.
+
+`from sims.rl import NavEnv` (and the other names of `sims.rl.env`, the module this package
+replaced) keeps working; the names load on first use, so `import sims.rl.policy` does not
+import MuJoCo Playground.
+"""
+
+import importlib
+
+_ENV_NAMES = ("AHEAD", "KEEPOUT_MODES", "MODES", "NavEnv", "NavEnvConfig", "NavModel", "State",
+              "clip_command", "nav_model")
+__all__ = sorted(_ENV_NAMES + ("NavTask",))
+
+
+def __getattr__(name):
+  if name in _ENV_NAMES:
+    return getattr(importlib.import_module("sims.rl.env"), name)
+  if name == "NavTask":
+    return importlib.import_module("sims.rl.task").NavTask
+  raise AttributeError(f"module 'sims.rl' has no attribute {name!r}")

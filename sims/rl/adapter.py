@@ -1,0 +1,149 @@
+"""A Playground `MjxEnv` behind gymnax's API (what rejax's PPO calls) and behind Gymnasium's wrappers.
+
+rejax speaks gymnax's env API (its 5-value `step`; gymnax 1.0's own
+`Environment.step` returns 6, so the adapter does not subclass it).
+`GymnaxAdapter` puts a Playground-contract env behind it: Brax's
+`EpisodeWrapper` (time limit) inside, auto-reset outside (to the episode's
+first state, or a fresh `reset`), and optionally a Playground
+`randomization_fn` drawn per episode.
+"""
+
+from typing import Any, Callable
+
+import jax
+import jax.numpy as jnp
+from brax.envs.wrappers.training import EpisodeWrapper
+from flax import struct
+from gymnax.environments import spaces
+
+from sims.rl.env import NavEnv
+
+
+@struct.dataclass
+class AdapterParams:
+  """gymnax env params: only the time limit rejax reads (`max_steps_in_episode`)."""
+  max_steps_in_episode: int = struct.field(pytree_node=False, default=200)
+
+
+@struct.dataclass
+class AdapterState:
+  """One env's state behind the adapter.
+
+  Attributes:
+    env_state: the Playground State (inside Brax's EpisodeWrapper).
+    first: the State the episode started from (restored on done unless full_reset).
+    model_leaves: the randomised model leaves of this env ([] without a randomization_fn).
+  """
+  env_state: Any
+  first: Any
+  model_leaves: Any
+
+
+class GymnaxAdapter:
+  """A Playground `MjxEnv` behind gymnax's API (what rejax's algorithms call).
+
+  `reset(key, params) -> (obs, state)`, `step(key, state, action, params) ->
+  (obs, state, reward, done, info)` with auto-reset on done (terminal or time
+  limit), `action_space`, `observation_space`. Auto-reset restores the
+  episode's first state (Playground's default, `full_reset=False`; cheap) or
+  calls `reset` with a fresh key (`full_reset=True`: new spawn, goal and
+  randomised model every episode). With `randomization_fn` (Playground's
+  `fn(model, rng=[N, 2]) -> (model_v, in_axes)`) each env draws its own model
+  at reset and only the randomised leaves are carried in its state; the model
+  is swapped in the way Playground's `BraxDomainRandomizationVmapWrapper` does.
+  """
+
+  def __init__(self, env: NavEnv, episode_length: int,
+               randomization_fn: Callable | None = None, *, full_reset: bool = False):
+    if isinstance(episode_length, bool) or int(episode_length) != episode_length or episode_length < 1:
+      raise ValueError(f"episode_length must be an integer >= 1; got {episode_length!r}")
+    self.env = env
+    self.wrapped = EpisodeWrapper(env, int(episode_length), 1)
+    self.episode_length = int(episode_length)
+    self.randomization_fn = randomization_fn
+    self.full_reset = bool(full_reset)
+
+  @property
+  def default_params(self) -> AdapterParams:
+    return AdapterParams(max_steps_in_episode=self.episode_length)
+
+  def _axes(self, base):
+    """in_axes of the randomization_fn, flattened alongside `base` (None subtrees of the model
+    count as leaves in both, so the two lists line up even where mjx.Model has None fields)."""
+    _, in_axes = self.randomization_fn(base, rng=jnp.zeros((1, 2), jnp.uint32))
+    is_none = lambda x: x is None
+    axes = jax.tree.leaves(in_axes, is_leaf=is_none)
+    leaves, treedef = jax.tree.flatten(base, is_leaf=is_none)
+    if len(axes) != len(leaves):
+      raise ValueError(f"randomization_fn returned in_axes with {len(axes)} leaves for a model with "
+                       f"{len(leaves)}: in_axes must mirror the model's structure")
+    return axes, leaves, treedef
+
+  def draw_model(self, key):
+    """Draws one env's model: the randomised leaves only (list; empty without a randomization_fn).
+
+    Carry these in the env's state and pass them to `model_for` / `run_with_model`.
+    """
+    if self.randomization_fn is None:
+      return []
+    base = self.env.unwrapped._mjx_model
+    axes, _, _ = self._axes(base)
+    model_v, _ = self.randomization_fn(base, rng=key[None])
+    leaves = jax.tree.leaves(model_v, is_leaf=lambda x: x is None)
+    return [jnp.take(x, 0, axis=ax) for x, ax in zip(leaves, axes) if ax is not None]
+
+  def model_for(self, model_leaves):
+    """The env's whole model with `model_leaves` (from `draw_model`) in place of the randomised fields."""
+    base = self.env.unwrapped._mjx_model
+    if self.randomization_fn is None:
+      return base
+    axes, leaves, treedef = self._axes(base)
+    it = iter(model_leaves)
+    return jax.tree.unflatten(treedef, [x if ax is None else next(it) for x, ax in zip(leaves, axes)])
+
+  def run_with_model(self, model_leaves, fn):
+    """Calls `fn()` (which resets or steps `self.wrapped`) with the env's model swapped for
+    `model_for(model_leaves)`, the way Playground's domain-randomisation wrapper does."""
+    env = self.env.unwrapped
+    old = env._mjx_model
+    env._mjx_model = self.model_for(model_leaves)
+    try:
+      return fn()
+    finally:
+      env._mjx_model = old
+
+  def reset(self, key, params=None):
+    del params
+    k_model, k_env = jax.random.split(key)
+    leaves = self.draw_model(k_model)
+    st = self.run_with_model(leaves, lambda: self.wrapped.reset(k_env))
+    return st.obs, AdapterState(st, None if self.full_reset else st, leaves)
+
+  def step(self, key, state: AdapterState, action, params=None):
+    st = self.run_with_model(state.model_leaves, lambda: self.wrapped.step(state.env_state, action))
+    done = st.done > 0
+    info = {"metrics": st.metrics, "truncation": st.info["truncation"], "final_obs": st.obs}
+    if self.full_reset:
+      _, restart = self.reset(key)
+    else:
+      restart = AdapterState(state.first, state.first, state.model_leaves)
+    new = jax.tree.map(lambda a, b: jnp.where(done, a, b), restart,
+                       AdapterState(st, state.first, state.model_leaves))
+    return new.env_state.obs, new, st.reward, done, info
+
+  def action_space(self, params=None):
+    return spaces.Box(low=-1.0, high=1.0, shape=(self.env.action_size,))
+
+  def observation_space(self, params=None):
+    return spaces.Box(low=-jnp.inf, high=jnp.inf, shape=(self.env.observation_size,))
+
+  @property
+  def num_actions(self) -> int:
+    return self.env.action_size
+
+  @property
+  def name(self) -> str:
+    return type(self.env.unwrapped).__name__
+
+
+__all__ = ["AdapterParams", "AdapterState", "GymnaxAdapter"]
