@@ -30,8 +30,10 @@ echo "== exact-arithmetic tests on the GPU (FMA contraction) -> $OUT/gpu_tests.l
 # test_keepout_paths: the fast paths' error bounds (2-ulp division, FMA, flush-to-zero) on this device;
 # test_trust: costmaps with double (float64) geometry beside float32 masks.
 # TEST_FILES overrides the list (e.g. the files a change touched, to fit the call's time limit).
-timeout "${TEST_TIMEOUT:-300}" python3 -m pytest -q ${TEST_FILES:-tests/test_geometry.py tests/test_fast_paths.py \
-  tests/test_keepout_paths.py tests/test_trust.py} -k "not eager_speed_filter_compiles_once" \
+timeout "${TEST_TIMEOUT:-300}" python3 -m pytest -q ${TEST_FILES:-tests/jaxfilters/test_geometry.py tests/jaxfilters/test_keepout_paths_random.py \
+  tests/jaxfilters/test_keepout_paths.py tests/jaxfilters/test_float32_inputs.py \
+  tests/jaxfilters/test_keepout_unknown_cells.py tests/jaxfilters/test_mask_index.py tests/jaxfilters/test_nav2_doubles.py \
+  tests/jaxfilters/test_state_filter_gates.py} -k "not eager_speed_filter_compiles_once" \
   -p no:cacheprovider > "$OUT/gpu_tests.log" 2>&1
 echo "pytest rc=$? ; tail:"; tail -n 3 "$OUT/gpu_tests.log"
 fi

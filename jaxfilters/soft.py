@@ -19,7 +19,7 @@ These functions are its smooth counterparts, for tuning zones with `jax.grad`:
 As width -> 0 the soft keepout cost at a point whose distance to every
 boundary is much larger than `width` tends to the cost the hard keepout filter
 writes at that point's cell over a free costmap, and the soft speed limit to
-the hard SpeedFilter's limit (tests/test_soft.py checks both at cell centres).
+the hard SpeedFilter's limit (tests/jaxfilters/test_soft.py checks both at cell centres).
 Differences from the hard path, by design: the soft functions read the zone at
 the point itself (the hard path at the centre of its mask cell); a shape with
 value -1 (unknown) is transparent (the hard SpeedFilter instead keeps its

@@ -64,16 +64,19 @@ def nav2_maps() -> Path:
   return NAV2_MAPS
 
 
-# The files that take longest (CPU time on a 2-core machine, longest first). `make test` hands whole
+# The files that take longest (paths under tests/) (CPU time on a 2-core machine, longest first). `make test` hands whole
 # files to its two workers in the order the collection lists them; these go first, so that the
 # short files fill in at the end instead of one worker running a long file alone while the other
 # has nothing left. pytest-xdist's default order (files with the most tests first) would start
 # these last: most have few tests.
-SLOW_FILES = ("test_notebooks.py", "test_sharding.py", "test_rl_cli.py", "test_rl.py", "test_readme.py",
-              "test_sims_fleet.py", "test_layers.py", "test_keepout_paths.py", "test_bag.py",
-              "test_sims_keepout_escape.py", "test_prologue.py", "test_fast_paths.py", "test_cli_matrix.py",
-              "test_keepout_pallas.py", "test_cli.py", "test_shapes.py", "test_rl_layouts.py",
-              "test_gym_env.py", "test_keepout_footprint.py", "test_map_fuzz.py")
+SLOW_FILES = ("project/test_notebooks.py", "scale/test_sharding.py", "commands/test_rl.py", "rl/test_env.py",
+              "project/test_readme.py", "fleet/test_env.py", "jaxfilters/test_layers.py",
+              "jaxfilters/test_keepout_paths.py", "record/test_bag.py", "fleet/test_keepout_escape.py",
+              "jaxfilters/test_keepout_prologue.py", "jaxfilters/test_keepout_paths_random.py",
+              "commands/test_cli_matrix.py", "jaxfilters/test_keepout_pallas.py", "commands/test_fleet.py",
+              "jaxfilters/test_shapes.py", "rl/test_layouts.py", "rl/test_gym.py",
+              "jaxfilters/test_keepout_footprint.py", "fuzz/test_map_files.py")
+TESTS = Path(__file__).resolve().parent
 
 
 def pytest_configure(config):
@@ -86,7 +89,7 @@ def pytest_collection_modifyitems(config, items):
   """SLOW_FILES first, in that order; the other files after them as collected (a stable sort)."""
   del config
   rank = {name: i for i, name in enumerate(SLOW_FILES)}
-  items.sort(key=lambda item: rank.get(item.path.name, len(rank)))
+  items.sort(key=lambda item: rank.get(item.path.resolve().relative_to(TESTS).as_posix(), len(rank)))
 
 
 def pytest_unconfigure(config):

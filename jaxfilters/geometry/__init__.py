@@ -17,7 +17,7 @@ jaxfilters never trusts a rounded quotient for a cell index. Each index is the
 
 For float32 inputs with |quotient| < 2**22 (20 km at 5 mm cells) this equals
 float64 arithmetic on the same float32 values, which is what Nav2 computes when
-given those values (tests/test_geometry.py proves it with hypothesis up to
+given those values (tests/jaxfilters/test_geometry.py proves it with hypothesis up to
 10 km, including points placed exactly on cell boundaries). XLA flushes
 subnormal float32 values to zero, so the guarantee holds for inputs that are 0
 or at least 1e-30 in magnitude (no error term of the arithmetic is subnormal). Host-side float64

@@ -36,7 +36,7 @@ def mask_cost_u8(d):
 
   Known are 0..100 (a byte <= 100 once read as uint8); their cost round(2.54 d) is
   2 d + ((553 d + 511) >> 10), checked for every d in 0..100 by
-  tests/test_keepout_paths.py against `occ_to_cost`. Unknown bytes give garbage costs
+  tests/jaxfilters/test_keepout_paths.py against `occ_to_cost`. Unknown bytes give garbage costs
   that `known` masks.
   """
   u = jax.lax.bitcast_convert_type(d, jnp.uint8)

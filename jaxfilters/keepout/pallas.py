@@ -27,7 +27,7 @@ window), and every cell of a robot the caller does not hand to the kernel, read
 no mask byte and keep their value: written back unchanged by default; with
 `in_place` not touched at all where a whole row (rows layout) or robot (both)
 lies outside. The result is the same integers as the XLA aligned path
-(tests/test_keepout_pallas.py runs the kernel in the Pallas interpreter against
+(tests/jaxfilters/test_keepout_pallas.py runs the kernel in the Pallas interpreter against
 it and against a float64 reference).
 
 Pallas's Triton backend computes addresses in 32-bit signed arithmetic for an

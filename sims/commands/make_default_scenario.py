@@ -18,7 +18,7 @@ as Nav2's map_server would load them. The layout is a 30 m x 20 m warehouse at
 
 Pixels are written by hand (not with `save_map`) because map_saver's scale
 mode cannot write the 1.0 / 0.0 thresholds the bringup masks use; the loader
-test in tests/test_sims_scenario.py checks every value through `load_map`.
+test in tests/fleet/test_scenario.py checks every value through `load_map`.
 """
 
 from __future__ import annotations

@@ -7,7 +7,7 @@ The source must be a run of `make demo` (`jaxfilters fleet --out out/demo` with 
 its summary.json is checked against the `fleet` command's defaults, so the README never shows
 another run. The copy carries a PNG text chunk "jaxfilters-demo" (JSON: the command, robots,
 seconds, seed, goals reached, keepout entries, speed compliance, device) that
-tests/test_readme.py checks against the `fleet` defaults.
+tests/project/test_readme.py checks against the `fleet` defaults.
 """
 
 from __future__ import annotations

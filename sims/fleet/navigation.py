@@ -250,7 +250,7 @@ def value_and_direction(field: NavField, goal: jax.Array, xy: jax.Array) -> tupl
   the field instead of 20 separate ones, then the same float32 arithmetic as
   `nav_value` and `descent_direction`. Results agree with them to float rounding
   (XLA may contract a multiply-add differently; the direction, a difference of
-  nearby values, within 1e-4; tests/test_fleet_perf.py).
+  nearby values, within 1e-4; tests/fleet/test_planner_reference.py).
 
   Args:
     field: the shared NavField.
@@ -309,7 +309,7 @@ def value_and_direction_xy(field: NavField, goal: jax.Array, x: jax.Array, y: ja
   on arrays of x's shape, so a GPU computes everything inside the kernel that
   produced x and y (the one-pass planner, `planner.one_pass_terms`) instead of
   writing [corners, points, ...] arrays out. Sums run in a fixed order (results
-  agree with `value_and_direction` to float rounding; tests/test_fleet_perf.py).
+  agree with `value_and_direction` to float rounding; tests/fleet/test_planner_reference.py).
 
   Args:
     field: the shared NavField. goal: int32 [] station index.

@@ -172,7 +172,7 @@ def rollout_grid(pose: jax.Array, cmd: jax.Array, speeds: jax.Array, yaw_rates: 
   The ramps and headings are `ramp_tables`'; each candidate's points then add
   up its steps (v_t dt) (cos, sin)(midpoint heading_t), and its interval
   midpoints are the points less half a step (positions within 1e-5 m of a
-  step-by-step unicycle in float32; tests/test_fleet_perf.py).
+  step-by-step unicycle in float32; tests/fleet/test_planner_reference.py).
 
   `mode` picks how the sums run: "cumsum" (one cumulative sum over T, the
   points materialised behind an optimization barrier: XLA:CPU otherwise fuses
@@ -233,7 +233,7 @@ def one_pass_terms(lut, origin, res, pose, cmd, speeds, yaw_rates, speed_cap, sp
   `rollout_grid` (the same operations in the same order, up to the compiler's
   multiply-add contraction); the speed excess is summed step by step (a
   reduction may add in another order). Decisions equal the other modes'
-  (tests/test_fleet_perf.py).
+  (tests/fleet/test_planner_reference.py).
 
   Args:
     lut, origin, res, pose, cmd, limit_now, others, others_valid: as `plan_lut_one`.

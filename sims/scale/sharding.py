@@ -14,7 +14,7 @@ shared `WorldParams` replicated (`P()`).
     states, frames = env.rollout_fn(50, mesh=mesh)(params, states)
 
 Every sharded result equals the unsharded one (the same program per world;
-tests/test_sharding.py checks integer outputs exactly with 8 forced CPU
+tests/scale/test_sharding.py checks integer outputs exactly with 8 forced CPU
 devices). On the command line: `jaxfilters fleet --devices N|all`.
 
 Multi-host (`jax.distributed`): run the same program in every process; each
@@ -33,7 +33,7 @@ one machine with two processes of two CPU devices each:
 `distributed_rollout` (what that runs) calls `jax.distributed.initialize(
 coordinator_address, num_processes=2, process_id=i)`, builds a 4-device mesh,
 runs a sharded reset and rollout, and saves this process's shards of the
-integer outputs with their world indices; tests/test_sharding.py compares the
+integer outputs with their world indices; tests/scale/test_sharding.py compares the
 union of both files with a single-process run. On a GPU cluster the same code
 runs with one process per host (coordinator = host 0's address).
 """

@@ -24,7 +24,7 @@ its commanded twist, which is what the unicycle integrates. The unicycle with
 a goal-seeking controller (pure pursuit, smoothly saturated yaw rate and
 acceleration) keeps the dynamics that make the trade-off real and is
 differentiable end to end with `lax.scan`; its gradient matches central
-differences to < 1 % (tests/test_soft_tuning.py).
+differences to < 1 % (tests/tuning/test_corner_speed.py).
 
 Objective (maximised): mean progress along the route after T seconds minus
 `penalty` x the time-integrated soft keepout cost (`jaxfilters.soft`, zones
