@@ -1,62 +1,30 @@
-"""README.md: its Python snippets run as written when pasted into the Python REPL line by line, each
-on its own, from the repository root; it opens with its title and the two commands; its picture is
-the `make demo` run's."""
+"""README.md is a front page: its title and the two commands first, its snippet runs as written when pasted
+into the Python REPL from the repository root, its links lead to pages that exist, its picture is the
+`make demo` run's, and it stays short."""
 
-import code
-import contextlib
-import io
 import json
 import re
 from pathlib import Path
 
 import numpy as np
 
+from tests.repl import paste, run_page
+
 REPO = Path(__file__).resolve().parents[2]
 
 
-class _Repl(code.InteractiveConsole):
-  """The interactive interpreter `python` runs, with everything it would print collected."""
-
-  def __init__(self):
-    super().__init__(locals={"__name__": "__console__"})
-    self.errors: list[str] = []
-
-  def write(self, data):                       # syntax errors and tracebacks come through here
-    self.errors.append(data)
-
-
-def paste(block: str) -> _Repl:
-  """Feeds `block` to a fresh REPL one line at a time, as a paste into `python` does, then Enter."""
-  repl = _Repl()
-  with contextlib.redirect_stdout(io.StringIO()):      # expression statements echo their values
-    for line in block.splitlines():
-      repl.push(line)
-    repl.push("")
-  return repl
-
-
-def _blocks(text: str) -> list[str]:
-  return re.findall(r"```python\n(.*?)```", text, flags=re.S)
-
-
-def test_readme_python_snippets_paste_into_the_repl(monkeypatch):
+def test_readme_python_snippet_pastes_into_the_repl(monkeypatch):
   monkeypatch.chdir(REPO)
-  blocks = _blocks((REPO / "README.md").read_text())
-  assert len(blocks) >= 4
-  scopes = []
-  for k, block in enumerate(blocks):
-    repl = paste(block)                       # a fresh namespace: each snippet stands alone
-    assert not repl.errors, f"README.md python block {k} in the REPL:\n{''.join(repl.errors)}"
-    scopes.append(repl.locals)
-  # What the snippets claim.
-  pipeline = next(sc for sc in scopes if "occ" in sc)
-  out, B = pipeline["out"], pipeline["B"]
-  assert out.combined.cost.shape == (B, 60, 60) and out.combined.cost.dtype == np.uint8
-  assert next(sc for sc in scopes if "frames" in sc)["frames"].pose.shape[0] == 50
+  scopes = run_page(REPO / "README.md")
+  assert len(scopes) == 1
+  sc = scopes[0]
+  assert sc["costmaps"].cost.shape == (64, 60, 60) and sc["costmaps"].cost.dtype == np.uint8
+  assert int((np.asarray(sc["costmaps"].cost) == 254).sum()) > 0          # some windows hold keepout cells
+  assert sc["out"].speed_limit.shape == (64,)
 
 
 def test_the_repl_check_catches_a_decorated_def_without_a_blank_line():
-  """The README's first block once failed in the REPL: a statement right after an indented body."""
+  """A statement right after an indented body is a SyntaxError in the REPL (a script would accept it)."""
   bad = "def f(x):\n  return x\ny = f(1)\n"
   assert paste(bad).errors and "SyntaxError" in "".join(paste(bad).errors)
   good = paste("def f(x):\n  return x\n\ny = f(1)\n")
@@ -67,6 +35,15 @@ def test_readme_starts_with_its_title_and_the_two_commands():
   text = (REPO / "README.md").read_text()
   assert text.startswith("# jaxfilters\n\n```\nmake demo\nmake test\n```\n")
   assert (REPO / "docs" / "demo.png").is_file()
+
+
+def test_readme_is_a_front_page_whose_links_exist():
+  text = (REPO / "README.md").read_text()
+  assert len(text.splitlines()) <= 150
+  links = re.findall(r"\]\(([^)#]+)\)", text)
+  assert links and all((REPO / link).is_file() for link in links), [x for x in links if not (REPO / x).is_file()]
+  guides = sorted(p.relative_to(REPO).as_posix() for p in (REPO / "docs" / "guides").glob("*.md"))
+  assert set(guides) <= set(links), f"guides the README does not link: {set(guides) - set(links)}"
 
 
 def test_readme_picture_is_the_make_demo_run():
