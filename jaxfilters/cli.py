@@ -29,7 +29,7 @@ import os
 import sys
 import traceback
 
-from jaxfilters import xla_flags
+from jaxfilters import compile_cache, xla_flags
 from jaxfilters._version import __version__
 
 ENTRY_POINT_GROUP = "jaxfilters.commands"
@@ -90,7 +90,24 @@ def build_parser() -> ArgumentParser:
                               parser_class=ArgumentParser)
   for _, register in _registrars():
     register(sub)
+  _add_no_cache(parser)
   return parser
+
+
+NO_CACHE_HELP = ("do not use the persistent XLA compilation cache (default: on, in ~/.cache/jaxfilters/xla; "
+                 "JAXFILTERS_NO_CACHE=1 also turns it off, JAXFILTERS_CACHE_DIR moves it)")
+
+
+def _add_no_cache(parser: argparse.ArgumentParser) -> None:
+  """Gives every command's parser (nested ones too) the `--no-cache` option, unless it has its own."""
+  for action in parser._actions:   # noqa: SLF001 - argparse keeps subparsers only here
+    if isinstance(action, argparse._SubParsersAction):   # noqa: SLF001
+      for child in action.choices.values():
+        has_sub = any(isinstance(a, argparse._SubParsersAction) for a in child._actions)   # noqa: SLF001
+        if has_sub:
+          _add_no_cache(child)
+        elif "--no-cache" not in child._option_string_actions:   # noqa: SLF001
+          child.add_argument("--no-cache", action="store_true", help=NO_CACHE_HELP)
 
 
 def main(argv=None) -> int:
@@ -106,6 +123,7 @@ def main(argv=None) -> int:
       setattr(args, args.passthrough, list(getattr(args, args.passthrough, None) or []) + extra)
   except SystemExit as e:          # --help, --version (0) and argparse usage errors (2)
     return int(e.code or 0) if not isinstance(e.code, str) else EXIT_USAGE
+  compile_cache.enable(disable=bool(getattr(args, "no_cache", False)))
   try:
     return int(args.func(args) or 0)
   except CliError as e:

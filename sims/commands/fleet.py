@@ -134,8 +134,6 @@ def register_fleet(sub) -> argparse.ArgumentParser:
   b.add_argument("--overwrite", action="store_true", help="replace a non-empty --bag folder")
   p.add_argument("--no-check", action="store_true",
                  help="exit 0 even with keepout entries or speed violations")
-  p.add_argument("--no-cache", action="store_true",
-                 help="do not use the persistent XLA compilation cache (~/.cache/jaxfilters/xla)")
   p.set_defaults(func=run_fleet)
   return p
 
@@ -209,17 +207,6 @@ def _steps_and_chunks(args, step_s: float) -> tuple[int, int]:
   return total, chunk
 
 
-def _enable_cache() -> None:
-  import jax
-  root = Path(os.environ.get("XDG_CACHE_HOME", Path.home() / ".cache")) / "jaxfilters" / "xla"
-  try:
-    root.mkdir(parents=True, exist_ok=True)
-  except OSError:
-    return
-  jax.config.update("jax_compilation_cache_dir", str(root))
-  jax.config.update("jax_persistent_cache_min_compile_time_secs", 1.0)
-
-
 def _table(summary: dict, header: str) -> str:
   f = summary["fleet"]
   lines = [header, f"{'zone':<10}{'limit':>12}{'time in zone':>16}{'max speed':>13}  compliant"]
@@ -288,8 +275,6 @@ def run_fleet(args) -> int:
     CliError: an inconsistent option (--robots, --robots-per-world, a partial set of maps).
   """
   t_start = time.perf_counter()
-  if not args.no_cache:
-    _enable_cache()
   import jax
   import numpy as np
   from sims.fleet.config import FleetConfig, PlannerConfig

@@ -100,13 +100,14 @@ rk = jax.device_put(jax.random.split(jax.random.PRNGKey(2), 8), w)
 out["rl_reset_collectives"] = collectives(jax.jit(jax.vmap(renv.reset), in_shardings=w, out_shardings=w)
                                           .lower(rk).compile())
 # The same reset with jax.lax.top_k for the spawn draw: the check sees the gather it adds.
-real_top_k = sharding.top_k
-sharding.top_k = jax.lax.top_k
+from sims.fleet import topk
+real_top_k = topk.top_k
+topk.top_k = jax.lax.top_k
 try:
   out["rl_reset_collectives_lax_top_k"] = collectives(jax.jit(jax.vmap(renv.reset), in_shardings=w, out_shardings=w)
                                                       .lower(rk).compile())
 finally:
-  sharding.top_k = real_top_k
+  topk.top_k = real_top_k
 
 # Mesh errors.
 errs = []
