@@ -272,9 +272,10 @@ class NavVectorEnv(gymnasium.vector.VectorEnv):
 
   def __init__(self, num_envs: int, *, episode_length: int = DEFAULT_EPISODE_LENGTH, randomize: bool = False,
                env: NavEnv | None = None, randomization_fn: Callable | None = None, render_mode: None = None):
-    if isinstance(num_envs, bool) or not isinstance(num_envs, numbers.Integral) or not 1 <= num_envs <= MAX_NUM_ENVS:
-      raise ValueError(f"NavVectorEnv: num_envs must be an integer in [1, 2**21 = {MAX_NUM_ENVS:,d}]; got "
-                       f"{num_envs!r}")
+    if isinstance(num_envs, bool) or not isinstance(num_envs, numbers.Integral) or num_envs < 1:
+      raise ValueError(f"NavVectorEnv: num_envs must be an integer >= 1; got {num_envs!r}")
+    if num_envs > MAX_NUM_ENVS:
+      raise ValueError(f"NavVectorEnv: num_envs must be at most 2**21 = {MAX_NUM_ENVS:,d}; got {num_envs!r}")
     self.env, fn = _resolve(env, episode_length, randomize, randomization_fn, render_mode, "NavVectorEnv")
     self.num_envs = int(num_envs)
     self.episode_length = int(episode_length)

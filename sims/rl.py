@@ -282,8 +282,10 @@ class NavEnv(mjx_env.MjxEnv):
     fleet_config = FleetConfig(robots_per_world=1) if fleet_config is None else fleet_config
     if not isinstance(fleet_config, FleetConfig):
       raise TypeError(f"fleet_config must be a FleetConfig; got {type(fleet_config).__name__}")
-    if isinstance(layouts, bool) or not isinstance(layouts, (int, np.integer)) or not 1 <= layouts <= MAX_LAYOUTS:
-      raise ValueError(f"layouts must be an integer in [1, {MAX_LAYOUTS}]; got {layouts!r}")
+    if isinstance(layouts, bool) or not isinstance(layouts, (int, np.integer)) or layouts < 1:
+      raise ValueError(f"layouts must be an integer >= 1; got {layouts!r}")
+    if layouts > MAX_LAYOUTS:
+      raise ValueError(f"layouts must be at most {MAX_LAYOUTS} (each is a world built on the host); got {layouts!r}")
     fleet = FleetEnv.create(scenario, fleet_config, seed=seed)
     if layouts == 1:
       return cls(fleet, config)
