@@ -26,6 +26,7 @@ import argparse
 import importlib
 import importlib.metadata
 import os
+import re
 import sys
 import traceback
 
@@ -214,6 +215,63 @@ def number_option(option: str, text: str) -> float:
   return value
 
 
+_INT_TEXT = re.compile(r"-?[0-9]+", re.ASCII)
+_INT_MAX_DIGITS = 30
+
+
+def strict_int(text: str) -> int:
+  """An integer written plainly: ASCII digits with an optional leading '-', nothing else.
+
+  Python's int() also reads '6_4' (64), ' 2 ', '+2' and non-ASCII digits such as
+  full-width '２'; an option value is taken only as the user would read it. At
+  most 30 digits (every bounded option lies far below).
+
+  Raises:
+    ValueError: any other text (the message says what is expected).
+  """
+  if not isinstance(text, str) or not _INT_TEXT.fullmatch(text):
+    from jaxfilters import validate
+    raise ValueError(f"invalid int value: {validate.short_repr(text)} (expected ASCII digits with an "
+                     "optional leading '-', such as 64)")
+  if len(text.lstrip("-")) > _INT_MAX_DIGITS:
+    raise ValueError(f"out of range: {text[:12]}... has {len(text.lstrip('-'))} digits (at most "
+                     f"{_INT_MAX_DIGITS})")
+  return int(text)
+
+
+def int_type(low: int | None = None, high: int | None = None):
+  """An argparse `type` for an integer option: `strict_int`, then low <= value <= high (None: no bound).
+
+  A refused value is argparse's one-line usage error, exit 2: "argument --x:
+  invalid int value: '6_4' (...)" or "argument --x: must lie in [1, 1024]; got 4096".
+  """
+  def parse(text):
+    try:
+      value = strict_int(text)
+    except ValueError as e:
+      raise argparse.ArgumentTypeError(str(e)) from None
+    if (low is not None and value < low) or (high is not None and value > high):
+      if high is None:
+        raise argparse.ArgumentTypeError(f"must be >= {low}; got {value}")
+      if low is None:
+        raise argparse.ArgumentTypeError(f"must be <= {high:,d}; got {value}")
+      raise argparse.ArgumentTypeError(f"must lie in [{low:,d}, {high:,d}]; got {value}")
+    return value
+  parse.__name__ = "int"
+  parse.low, parse.high = low, high      # read by tests and the fuzz harness
+  return parse
+
+
+def path_type(text: str):
+  """An argparse `type` for a path option: a non-empty path (''' is refused, not read as '.')."""
+  from pathlib import Path
+  if not isinstance(text, str) or not text.strip():
+    raise argparse.ArgumentTypeError(f"must name a path; got {text!r}")
+  if "\x00" in text:
+    raise argparse.ArgumentTypeError("must not contain a NUL character")
+  return Path(text)
+
+
 def given_speed_options(args) -> list[str]:
   """The speed options given on the command line, by name."""
   return [o for o, v in (("--speed-type", args.speed_type), ("--speed-base", args.speed_base),
@@ -319,6 +377,31 @@ def prepare_out(out, option: str = "--out"):
   except OSError as e:
     raise CliError(f"{option} {out}: cannot write there ({e.strerror or e})") from None
   return out
+
+
+def check_creatable(out, option: str = "--out") -> None:
+  """Proves, creating nothing that stays, that a folder can be made (or written) at `out`.
+
+  The nearest existing folder on the way is checked by making and removing a
+  probe folder in it, so a read-only place, /proc or a file in the way is refused
+  before a command does its work; `prepare_out` creates the folder afterwards.
+
+  Raises:
+    CliError: `out` or a parent on its way is not a folder, or nothing can be created there.
+  """
+  import tempfile
+  from pathlib import Path
+  try:
+    target = Path(out).absolute()
+    while not target.exists() and not target.is_symlink():
+      target = target.parent
+    if not target.is_dir():
+      raise CliError(f"{option} {out}: {target} is not a folder")
+    os.rmdir(tempfile.mkdtemp(prefix=".jaxfilters_probe_", dir=target))
+  except OSError as e:
+    raise CliError(f"{option} {out}: cannot create a folder in {target} ({e.strerror or e})") from None
+  except ValueError as e:       # an embedded NUL
+    raise CliError(f"{option} {out!r}: not a usable path ({e})") from None
 
 
 def read_text_file(path: str, option: str, *, max_bytes: int) -> str:

@@ -2,7 +2,7 @@
 
 sims/fleet/planner.py and sims/fleet/navigation.py share work between candidates, pack
 the costmap rules into one table and gather through flat indices;
-tests/test_fleet_perf.py checks that they choose the same commands with the
+tests/fleet/test_planner_reference.py checks that they choose the same commands with the
 same scores as this straightforward version (and the navigation field lookups
 below), and benchmarks/fleet_breakdown.py times it as the `reference_planner`
 variant. It shares no code with sims/fleet/planner.py.

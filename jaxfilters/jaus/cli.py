@@ -13,7 +13,7 @@ from __future__ import annotations
 import os
 import stat
 
-from jaxfilters.cli import EXIT_OK, ArgumentParser, CliError
+from jaxfilters.cli import EXIT_OK, ArgumentParser, CliError, int_type
 
 
 def register(sub) -> None:
@@ -45,7 +45,7 @@ def register(sub) -> None:
   enc.add_argument("--profile", choices=("iop", "design"), default="iop",
                    help="iop: IDs 0xD742/0xD738 (published IOP CostMap2D); design: IDs "
                    "0x4C11/0x2C11 with uint32 sizes (default: iop)")
-  enc.add_argument("--window", nargs=4, type=int, metavar=("COL", "ROW", "WIDTH", "HEIGHT"),
+  enc.add_argument("--window", nargs=4, type=int_type(), metavar=("COL", "ROW", "WIDTH", "HEIGHT"),
                    help="encode only this window of the map, in cells; (COL, ROW) is its "
                    "lower-left cell and row 0 is the lowest y, as in OccupancyGrid")
   enc.add_argument("--single", action="store_true",

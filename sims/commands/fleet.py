@@ -34,6 +34,12 @@ from jaxfilters import cli as jcli
 from jaxfilters.cli import EXIT_OK, EXIT_VIOLATION, CliError
 from sims.commands import scenario_args
 
+# Bounds of the size options, checked by the parser (exit 2, one line) and stated in their help.
+MAX_ROBOTS = 2 ** 20              # 16 x the 65,536 robots BENCHMARKS.md runs on one GPU
+MAX_ROBOTS_PER_WORLD = 1024       # robots in one warehouse (their pairwise checks grow as its square)
+MAX_STEPS = 1_000_000             # env steps of 0.2 s (55 h simulated); the pictures keep every step
+BAG_MARKER = ".jaxfilters_fleet_bag"   # sims.record.bag.MARKER_NAME (the parser imports no simulator code)
+
 
 class _Progress:
   """A text progress bar on stderr: redrawn in place on a terminal, a line per 10 % otherwise."""
@@ -97,21 +103,27 @@ def register_fleet(sub) -> argparse.ArgumentParser:
                      description="Simulate a fleet of differential-drive robots in MJX. Every velocity "
                      "command is clipped by the Nav2 speed filter and keepout zones are never entered.",
                      epilog=_FLEET_EPILOG, formatter_class=argparse.RawDescriptionHelpFormatter)
-  p.add_argument("--robots", type=int, default=16, help="total robots (default 16)")
-  p.add_argument("--robots-per-world", type=int, default=None,
-                 help="robots sharing one warehouse (default: all of them up to 64, else the "
-                 "largest divisor of --robots up to 16); worlds are independent and batched")
+  int_ = jcli.int_type
+  p.add_argument("--robots", type=int_(1, MAX_ROBOTS), default=16,
+                 help=f"total robots, 1 to 2**20 = {MAX_ROBOTS:,d} (default 16)")
+  p.add_argument("--robots-per-world", type=int_(1, MAX_ROBOTS_PER_WORLD), default=None,
+                 help=f"robots sharing one warehouse, 1 to {MAX_ROBOTS_PER_WORLD:,d} (default: all of them up to 64, "
+                 "else the largest divisor of --robots up to 16); worlds are independent and batched")
   g = p.add_mutually_exclusive_group()
   g.add_argument("--seconds", type=float, default=None,
-                 help="simulated seconds, rounded to whole env steps of 0.2 s (default 120)")
-  g.add_argument("--steps", type=int, default=None, help="env steps of 1/costmap_hz (0.2 s) each")
+                 help=f"simulated seconds, rounded to whole env steps of 0.2 s, at most {MAX_STEPS:,d} steps "
+                 "(default 120)")
+  g.add_argument("--steps", type=int_(1, MAX_STEPS), default=None,
+                 help=f"env steps of 1/costmap_hz (0.2 s) each, 1 to {MAX_STEPS:,d}")
   scenario_args.add_map_options(p)
-  p.add_argument("--seed", type=int, default=0, help="PRNG seed (default 0)")
-  p.add_argument("--out", type=Path, default=Path("out/fleet"), help="output folder (default out/fleet)")
+  p.add_argument("--seed", type=int_(0, 2 ** 32 - 1), default=0, help="PRNG seed in [0, 2**32) (default 0)")
+  p.add_argument("--out", type=jcli.path_type, default=Path("out/fleet"),
+                 help="output folder (default out/fleet); created once every option is checked")
   p.add_argument("--animate", action="store_true", help="also write fleet.gif")
   p.add_argument("--chunk-seconds", type=float, default=10.0,
                  help="simulated seconds per jitted chunk (progress granularity; default 10)")
-  p.add_argument("--record-robots", type=int, default=64, help="robots drawn in the pictures, >= 1 (default 64)")
+  p.add_argument("--record-robots", type=int_(1, MAX_ROBOTS_PER_WORLD), default=64,
+                 help=f"robots drawn in the pictures, 1 to {MAX_ROBOTS_PER_WORLD:,d} (default 64)")
   p.add_argument("--impl", choices=("jax", "warp"), default="jax", help="MJX implementation (default jax)")
   p.add_argument("--devices", default=None, metavar="N|all",
                  help="shard the worlds over N devices (or all); the world count must be a multiple "
@@ -121,17 +133,20 @@ def register_fleet(sub) -> argparse.ArgumentParser:
                  "'center' is Nav2's centre-cell test, 'footprint' the footprint test (Nav2 #6505); the "
                  "planner then treats an inscribed cell under the robot as a collision, as Nav2's controllers "
                  "do (default off: Nav2's filter after inflation)")
-  p.add_argument("--robots-in-keepout", type=int, default=0,
+  p.add_argument("--robots-in-keepout", type=int_(0, MAX_ROBOTS_PER_WORLD), default=0,
                  help="robots per world started with their footprint in a keepout zone (needs --keepout-escape)")
   b = p.add_argument_group("rosbag2 (MCAP) of the run, for Foxglove, RViz and PlotJuggler (needs the ros extra)")
-  b.add_argument("--bag", type=Path, default=None, metavar="DIR",
+  b.add_argument("--bag", type=jcli.path_type, default=None, metavar="DIR",
                  help="write the run as a rosbag2 folder in MCAP storage (map, masks, filter info, /tf, "
-                 "cmd_vel, speed_limit per robot; sims/record/bag.py lists the topics)")
-  b.add_argument("--bag-robots", type=int, default=None, metavar="N",
+                 "cmd_vel, speed_limit per robot; sims/record/bag.py lists the topics): a new or empty folder, not "
+                 "a symbolic link, apart from --out (neither inside the other)")
+  b.add_argument("--bag-robots", type=int_(1, MAX_ROBOTS), default=None, metavar="N",
                  help="robots recorded in the bag, the first N (default: up to 8)")
-  b.add_argument("--bag-costmaps", type=int, default=0, metavar="N",
+  b.add_argument("--bag-costmaps", type=int_(0, MAX_ROBOTS), default=0, metavar="N",
                  help="also record the local costmaps of the first N bag robots (default 0)")
-  b.add_argument("--overwrite", action="store_true", help="replace a non-empty --bag folder")
+  b.add_argument("--overwrite", action="store_true",
+                 help="replace a --bag folder an earlier `jaxfilters fleet --bag` wrote (proved by its "
+                 f"{BAG_MARKER} file; a folder holding anything else is refused, nothing deleted)")
   p.add_argument("--no-check", action="store_true",
                  help="exit 0 even with keepout entries or speed violations")
   p.set_defaults(func=run_fleet)
@@ -149,6 +164,9 @@ def _check_fleet_args(args) -> None:
     raise CliError(f"--robots-per-world must be >= 1; got {args.robots_per_world}")
   finite_positive("--seconds", args.seconds)
   finite_positive("--chunk-seconds", args.chunk_seconds)
+  if args.seconds is not None and args.seconds > MAX_STEPS * 0.2:
+    raise CliError(f"--seconds must be at most {MAX_STEPS * 0.2:,.0f} ({MAX_STEPS:,d} env steps of 0.2 s); "
+                   f"got {args.seconds!r}")
   if args.steps is not None and args.steps < 1:
     raise CliError(f"--steps must be >= 1; got {args.steps}")
   if not 0 <= args.seed < 2 ** 32:
@@ -162,6 +180,13 @@ def _check_fleet_args(args) -> None:
                    "robot started in a zone is deadlocked)")
   scenario_args.check_map_args(args)
   _check_bag_args(args)
+  jcli.check_creatable(Path(args.out))
+
+
+def _nested(a: Path, b: Path) -> bool:
+  """a and b name the same folder, or one lies inside the other (symbolic links on the way resolved)."""
+  ra, rb = a.resolve(), b.resolve()
+  return ra == rb or ra in rb.parents or rb in ra.parents
 
 
 def _check_bag_args(args) -> None:
@@ -187,8 +212,13 @@ def _check_bag_args(args) -> None:
   args.bag_robots = n
   try:
     check_bag_dir(args.bag, overwrite=args.overwrite)
+    if _nested(Path(args.bag), Path(args.out)):
+      raise CliError(f"--bag {args.bag} and --out {args.out} must be separate folders, neither inside the "
+                     "other (the run writes into --out; the bag folder holds only the bag)")
   except BagError as e:
     raise CliError(str(e)) from None
+  except (OSError, RuntimeError) as e:      # resolving a path (a loop of symbolic links)
+    raise CliError(f"--bag {args.bag} / --out {args.out}: cannot resolve ({e})") from None
 
 
 def _steps_and_chunks(args, step_s: float) -> tuple[int, int]:
@@ -239,10 +269,10 @@ def _mesh(devices, num_worlds: int):
   if devices is None:
     return None
   from sims.scale import sharding
-  text = str(devices).strip().lower()
+  text = str(devices).lower()
   if text != "all":
     try:
-      n = int(text)
+      n = jcli.strict_int(text)
     except ValueError:
       raise CliError(f"--devices must be a positive integer or 'all'; got {devices!r}") from None
   else:
@@ -275,6 +305,7 @@ def run_fleet(args) -> int:
     CliError: an inconsistent option (--robots, --robots-per-world, a partial set of maps).
   """
   t_start = time.perf_counter()
+  _check_fleet_args(args)       # before the simulator's imports: a refusal comes in seconds
   import jax
   import numpy as np
   from sims.fleet.config import FleetConfig, PlannerConfig
@@ -282,7 +313,6 @@ def run_fleet(args) -> int:
   from sims.fleet.metrics import summarize
   from sims.record.render import render_gif, render_png
 
-  _check_fleet_args(args)
   k = args.robots_per_world or (args.robots if args.robots <= 64 else
                                 max(d for d in range(1, 17) if args.robots % d == 0))
   if args.robots % k:
@@ -290,7 +320,6 @@ def run_fleet(args) -> int:
   if args.robots_in_keepout > k:
     raise CliError(f"--robots-in-keepout ({args.robots_in_keepout}) counts robots per world; it must be <= the "
                    f"robots per world ({k})")
-  out = jcli.prepare_out(Path(args.out))
   scenario = scenario_args.scenario_from_args(args, "fleet")
   escape = args.keepout_escape != "off"
   try:
@@ -305,6 +334,7 @@ def run_fleet(args) -> int:
   total_steps, chunk = _steps_and_chunks(args, step_s)
   # Full chunks, then one shorter chunk (compiled on its own) when `chunk` does not divide the run.
   lengths = [chunk] * (total_steps // chunk) + ([total_steps % chunk] if total_steps % chunk else [])
+  out = jcli.prepare_out(Path(args.out))      # every option checked: only now is --out created
 
   print(f"jaxfilters fleet: {scenario.name}, {args.robots} robots ({num_worlds} world(s) x {k}), "
         f"{total_steps * step_s:g} s simulated, device {jax.devices()[0].device_kind}", file=sys.stderr)
@@ -377,10 +407,13 @@ def run_fleet(args) -> int:
     written.append(render_gif(w, pose, speed, out / "fleet.gif", summary=summary,
                                 seconds_per_frame=step_s))
   if bag:
-    from sims.record.bag import host_recording, write_fleet_bag
+    from sims.record.bag import BagError, host_recording, write_fleet_bag
     recording = host_recording(recordings, robots=args.bag_robots, step_seconds=step_s)
-    written.append(write_fleet_bag(args.bag, scenario, recording, max_speed=config.robot.max_speed,
-                                   summary=summary, overwrite=args.overwrite))
+    try:
+      written.append(write_fleet_bag(args.bag, scenario, recording, max_speed=config.robot.max_speed,
+                                     summary=summary, overwrite=args.overwrite))
+    except BagError as e:       # the folder changed during the run; nothing in it was removed
+      raise CliError(f"{e} (it changed during the run; the summary and pictures are in {out})") from None
   header = (f"{scenario.name}: {args.robots} robots, {seconds:g} s simulated in {run_s:.1f} s "
             f"(setup {setup_s:.1f} s, compile {compile_s:.1f} s; "
             f"{summary['timing']['robot_steps_per_s']:.3g} robot-steps/s)")

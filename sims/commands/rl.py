@@ -40,6 +40,25 @@ from sims.commands import scenario_args
 
 POLICY_OUTPUTS = ("policy.json", "policy.msgpack", "results.json", "learning_curve.png")
 
+# Bounds of the size options, checked by the parser (exit 2, one line) before anything is built and
+# stated in each option's help. Generous for a multi-GPU host, and small enough that no count
+# overflows an int32 on the device or sizes an allocation past a GPU's memory:
+MAX_TIMESTEPS = 2 ** 30          # rejax counts env steps in an int32 (global_step); with rounding up to
+                                 # whole iterations (<= MAX_BATCH) and the split into calls the total
+                                 # stays below 2**31
+MAX_ENVS = 2 ** 21               # 2,097,152 envs: 8 GPUs x the 262,144 per GPU that BENCHMARKS.md runs
+MAX_STEPS = 4096                 # rollout length per PPO iteration
+MAX_BATCH = 2 ** 26              # --num-envs x --num-steps: the rollout buffer's rows (obs float32 each)
+MAX_MINIBATCHES = 2 ** 16
+MAX_HIDDEN_LAYERS = 4            # --hidden: a policy of 4 x 1024 units is what `rl eval` is made to load
+MAX_HIDDEN_UNITS = 1024
+MAX_EPISODE_LENGTH = 100_000     # env steps of 0.2 s per episode (5.5 h simulated)
+MAX_LAYOUTS = 1024               # each layout is a world built on the host (about 0.5 s and a map-sized
+                                 # mask each)
+MAX_EVALS = 1000                 # evaluation points, each a host round trip and a curve point
+MAX_EVAL_EPISODES = 2 ** 18      # episodes run at once on one device (--num-eval, --episodes)
+MAX_DEVICES = 4096
+
 _TRAIN_EPILOG = """\
 examples:
   jaxfilters rl train --timesteps 400000 --out out/ppo
@@ -102,15 +121,23 @@ def register_rl(sub) -> argparse.ArgumentParser:
                       description="Train PPO (rejax) on the fleet RL env (the built-in warehouse) with "
                       "progress lines on stderr; write the policy, results.json and learning_curve.png.",
                       epilog=_TRAIN_EPILOG, formatter_class=argparse.RawDescriptionHelpFormatter)
-  t.add_argument("--timesteps", type=int, default=400_000,
-                 help="env steps to train, rounded up to whole PPO iterations (default 400000)")
-  t.add_argument("--num-envs", type=int, default=32, help="parallel envs (default 32)")
-  t.add_argument("--num-steps", type=int, default=64, help="rollout length per PPO iteration (default 64)")
-  t.add_argument("--minibatches", type=int, default=8,
-                 help="minibatches per epoch; must divide --num-envs x --num-steps (default 8)")
+  int_ = jcli.int_type
+  t.add_argument("--timesteps", type=int_(1, MAX_TIMESTEPS), default=400_000,
+                 help="env steps to train, rounded up to whole PPO iterations, 1 to 2**30 = "
+                 f"{MAX_TIMESTEPS:,d} (the trainer counts env steps in an int32; default 400000)")
+  t.add_argument("--num-envs", type=int_(1, MAX_ENVS), default=32,
+                 help=f"parallel envs, 1 to 2**21 = {MAX_ENVS:,d} (default 32)")
+  t.add_argument("--num-steps", type=int_(1, MAX_STEPS), default=64,
+                 help=f"rollout length per PPO iteration, 1 to {MAX_STEPS:,d}; --num-envs x --num-steps at most "
+                 f"2**26 = {MAX_BATCH:,d} (default 64)")
+  t.add_argument("--minibatches", type=int_(1, MAX_MINIBATCHES), default=8,
+                 help=f"minibatches per epoch, 1 to {MAX_MINIBATCHES:,d}; must divide --num-envs x --num-steps "
+                 "(default 8)")
   t.add_argument("--hidden", default="64,64", metavar="H1,H2,...",
-                 help="hidden layer sizes of the actor and critic (default 64,64)")
-  t.add_argument("--episode-length", type=int, default=300, help="env steps of 0.2 s per episode (default 300)")
+                 help=f"hidden layer sizes of the actor and critic, 1 to {MAX_HIDDEN_LAYERS} layers of 1 to "
+                 f"{MAX_HIDDEN_UNITS} units (default 64,64)")
+  t.add_argument("--episode-length", type=int_(1, MAX_EPISODE_LENGTH), default=300,
+                 help=f"env steps of 0.2 s per episode, 1 to {MAX_EPISODE_LENGTH:,d} (default 300)")
   t.add_argument("--keepout", choices=("terminate", "penalty"), default="terminate",
                  help="a keepout entry ends the episode (terminate) or only costs reward (default terminate)")
   t.add_argument("--costmap-stop", action="store_true",
@@ -121,15 +148,18 @@ def register_rl(sub) -> argparse.ArgumentParser:
   t.add_argument("--randomize", action="store_true",
                  help="draw a zone layout (keepout and speed rectangles at random places, sizes and limits), "
                  "a scale of the limits and the goals per episode, from --layouts layouts seeded by --seed")
-  t.add_argument("--layouts", type=int, default=16,
-                 help="zone layouts with --randomize, the map's own first (default 16)")
+  t.add_argument("--layouts", type=int_(1, MAX_LAYOUTS), default=16,
+                 help=f"zone layouts with --randomize, the map's own first, 1 to {MAX_LAYOUTS:,d} (each is a "
+                 "world built on the host; default 16)")
   t.add_argument("--devices", default=None, metavar="N|all",
-                 help="shard the env batch over the first N devices (or all); --num-envs must be a "
-                 "multiple (default: one device)")
-  t.add_argument("--seed", type=int, default=0, help="PRNG seed (default 0)")
-  t.add_argument("--evals", type=int, default=20, help="evaluation points after the start (default 20)")
-  t.add_argument("--num-eval", type=int, default=32, help="episodes per evaluation (default 32)")
-  t.add_argument("--out", type=Path, required=True, metavar="DIR", help="output folder")
+                 help=f"shard the env batch over the first N devices (1 to {MAX_DEVICES:,d}) or all; --num-envs "
+                 "must be a multiple (default: one device)")
+  t.add_argument("--seed", type=int_(0, 2 ** 32 - 1), default=0, help="PRNG seed in [0, 2**32) (default 0)")
+  t.add_argument("--evals", type=int_(1, MAX_EVALS), default=20,
+                 help=f"evaluation points after the start, 1 to {MAX_EVALS:,d} (default 20)")
+  t.add_argument("--num-eval", type=int_(1, MAX_EVAL_EPISODES), default=32,
+                 help=f"episodes per evaluation, run at once, 1 to 2**18 = {MAX_EVAL_EPISODES:,d} (default 32)")
+  t.add_argument("--out", type=jcli.path_type, required=True, metavar="DIR", help="output folder")
   t.add_argument("--overwrite", action="store_true", help="write into a non-empty --out folder anyway")
   t.set_defaults(func=run_train)
 
@@ -137,17 +167,20 @@ def register_rl(sub) -> argparse.ArgumentParser:
                       description="Evaluate a saved policy: one episode on each of --episodes envs with "
                       "its mean action, on the built-in warehouse or the maps given.",
                       epilog=_EVAL_EPILOG, formatter_class=argparse.RawDescriptionHelpFormatter)
-  e.add_argument("--policy", type=Path, required=True, metavar="DIR",
+  e.add_argument("--policy", type=jcli.path_type, required=True, metavar="DIR",
                  help="policy folder (policy.json and policy.msgpack, as `rl train` writes)")
-  e.add_argument("--episodes", type=int, default=256, help="episodes, one per env, run at once (default 256)")
-  e.add_argument("--seed", type=int, default=0, help="PRNG seed of spawns, goals and layouts (default 0)")
+  e.add_argument("--episodes", type=int_(1, MAX_EVAL_EPISODES), default=256,
+                 help=f"episodes, one per env, run at once, 1 to 2**18 = {MAX_EVAL_EPISODES:,d} (default 256)")
+  e.add_argument("--seed", type=int_(0, 2 ** 32 - 1), default=0,
+                 help="PRNG seed of spawns, goals and layouts, in [0, 2**32) (default 0)")
   e.add_argument("--randomize", action="store_true",
                  help="draw a zone layout, a scale of the limits and the goals per episode, from --layouts "
                  "layouts seeded by --seed (never the layouts `rl train --seed` drew)")
-  e.add_argument("--layouts", type=int, default=16,
-                 help="zone layouts with --randomize, the map's own first (default 16)")
-  e.add_argument("--episode-length", type=int, default=None,
-                 help="env steps of 0.2 s per episode (default: the policy's training episode length)")
+  e.add_argument("--layouts", type=int_(1, MAX_LAYOUTS), default=16,
+                 help=f"zone layouts with --randomize, the map's own first, 1 to {MAX_LAYOUTS:,d} (default 16)")
+  e.add_argument("--episode-length", type=int_(1, MAX_EPISODE_LENGTH), default=None,
+                 help=f"env steps of 0.2 s per episode, 1 to {MAX_EPISODE_LENGTH:,d} (default: the policy's "
+                 "training episode length)")
   scenario_args.add_map_options(e)
   e.add_argument("--json", action="store_true", help="print one JSON object instead of a table")
   e.set_defaults(func=run_eval)
@@ -170,14 +203,14 @@ def _check_seed(seed: int) -> None:
 
 
 def parse_hidden(text: str) -> tuple[int, ...]:
-  """--hidden H1,H2,... -> sizes (1 to 8 layers of 1 to 4096 units), or CliError."""
-  from sims.rl.policy import MAX_HIDDEN, MAX_LAYERS
+  """--hidden H1,H2,... -> sizes (1 to MAX_HIDDEN_LAYERS layers of 1 to MAX_HIDDEN_UNITS units), or CliError."""
   try:
-    sizes = tuple(int(x) for x in str(text).split(","))
+    sizes = tuple(jcli.strict_int(x) for x in str(text).split(","))
   except ValueError:
     raise CliError(f"--hidden must be comma-separated integers such as 64,64; got {text!r}") from None
-  if not 1 <= len(sizes) <= MAX_LAYERS or not all(1 <= h <= MAX_HIDDEN for h in sizes):
-    raise CliError(f"--hidden must give 1 to {MAX_LAYERS} layers of 1 to {MAX_HIDDEN} units; got {text!r}")
+  if not 1 <= len(sizes) <= MAX_HIDDEN_LAYERS or not all(1 <= h <= MAX_HIDDEN_UNITS for h in sizes):
+    raise CliError(f"--hidden must give 1 to {MAX_HIDDEN_LAYERS} layers of 1 to {MAX_HIDDEN_UNITS} units; "
+                   f"got {text!r}")
   return sizes
 
 
@@ -186,19 +219,26 @@ def parse_devices(text, num_envs: int):
   against --num-envs where it is a number."""
   if text is None:
     return None
-  t = str(text).strip().lower()
-  if t == "all":
+  if str(text).lower() == "all":
     return "all"
   try:
-    n = int(t)
+    n = jcli.strict_int(str(text))
   except ValueError:
     raise CliError(f"--devices must be a positive integer or 'all'; got {text!r}") from None
-  if n < 1:
-    raise CliError(f"--devices must be >= 1; got {n}")
+  if not 1 <= n <= MAX_DEVICES:
+    raise CliError(f"--devices must be >= 1 and <= {MAX_DEVICES}; got {n}" if n > 0 else
+                   f"--devices must be >= 1; got {n}")
   if num_envs % n:
     raise CliError(f"--num-envs ({num_envs}) must be a multiple of --devices ({n}): each device steps "
                    "an equal share of the envs")
   return n
+
+
+def check_batch(num_envs: int, num_steps: int) -> None:
+  """--num-envs x --num-steps (the rollout buffer's rows) at most MAX_BATCH, or CliError."""
+  if num_envs * num_steps > MAX_BATCH:
+    raise CliError(f"--num-envs x --num-steps must be at most 2**26 = {MAX_BATCH:,d} (the rollout buffer's "
+                   f"rows); got {num_envs} x {num_steps} = {num_envs * num_steps:,d}")
 
 
 def _check_device_minibatches(args, n_dev: int) -> None:
@@ -211,7 +251,9 @@ def _check_device_minibatches(args, n_dev: int) -> None:
 def check_out_dir(out: Path, overwrite: bool) -> None:
   """--out is missing, empty, an earlier run's folder (only POLICY_OUTPUTS) or --overwrite; else CliError.
 
-  The folder is created and proved writable before anything is trained.
+  Nothing is created here (a command refused later leaves no folder behind): the
+  nearest existing folder is proved writable, and `run_train` creates --out once
+  every option, the devices included, has been checked.
   """
   if out.exists() and not out.is_dir():
     raise CliError(f"--out {out}: exists and is not a folder")
@@ -223,7 +265,7 @@ def check_out_dir(out: Path, overwrite: bool) -> None:
     if others:
       raise CliError(f"--out {out}: not empty and not an earlier policy folder (it holds {others[0]!r}); "
                      "pass --overwrite to write into it anyway")
-  jcli.prepare_out(out)
+  jcli.check_creatable(out)
 
 
 def _finite(v):
@@ -259,6 +301,7 @@ def run_train(args) -> int:
                        "num_eval"))
   _check_seed(args.seed)
   hidden = parse_hidden(args.hidden)
+  check_batch(args.num_envs, args.num_steps)
   if (args.num_envs * args.num_steps) % args.minibatches:
     raise CliError(f"--minibatches ({args.minibatches}) must divide --num-envs x --num-steps "
                    f"({args.num_envs * args.num_steps})")
@@ -271,10 +314,6 @@ def run_train(args) -> int:
   import jax
 
   from sims.scale import sharding
-  from sims.rl.policy import save_policy
-  from sims.rl.ppo import EVAL_KEYS, GymnaxAdapter, make_ppo, plot_curve, replicas_identical, train_with_curve
-  from sims.rl.randomization import training_env
-  from sims.rl.env import NavEnvConfig
 
   mesh = None
   if devices is not None:
@@ -286,6 +325,12 @@ def run_train(args) -> int:
   n_dev = 1 if mesh is None else int(mesh.devices.size)
   if devices == "all":                # a device count given as a number was checked before --out
     _check_device_minibatches(args, n_dev)
+  jcli.prepare_out(out)               # every option checked: only now is --out created
+  from sims.rl.policy import save_policy
+  from sims.rl.ppo import EVAL_KEYS, GymnaxAdapter, make_ppo, plot_curve, replicas_identical, train_with_curve
+  from sims.rl.randomization import training_env
+  from sims.rl.env import NavEnvConfig
+
   env, fn = training_env(None, randomize=args.randomize, seed=args.seed, layouts=args.layouts,
                          config=NavEnvConfig(keepout=args.keepout, costmap_stop=args.costmap_stop))
   adapter = GymnaxAdapter(env, args.episode_length, fn, full_reset=args.randomize)

@@ -23,9 +23,9 @@ from jaxfilters.cli import CliError
 def add_map_options(parser) -> None:
   """Adds --map/--keepout/--speed (with the speed info options) and the params options to `parser`."""
   m = parser.add_argument_group("maps from files (default: the built-in warehouse)")
-  m.add_argument("--map", type=Path, default=None, help="Nav2 map YAML of the static map")
-  m.add_argument("--keepout", type=Path, default=None, help="keepout mask YAML (Nav2 type 0)")
-  m.add_argument("--speed", type=Path, default=None, help="speed mask YAML")
+  m.add_argument("--map", type=jcli.path_type, default=None, help="Nav2 map YAML of the static map")
+  m.add_argument("--keepout", type=jcli.path_type, default=None, help="keepout mask YAML (Nav2 type 0)")
+  m.add_argument("--speed", type=jcli.path_type, default=None, help="speed mask YAML")
   jcli.add_speed_options(m)
   jcli.add_params_options(parser)
 

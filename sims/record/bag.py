@@ -20,6 +20,11 @@ Topic names follow the nav2_params.yaml that ships with the built-in scenario
 (`keepout_filter_mask`, `speed_filter_mask`, `*_costmap_filter_info`); the
 nav2_msgs types are registered from their .msg definitions (jaxfilters.ros),
 so any reader decodes them by name. Writing needs the `ros` extra (rosbags).
+
+Besides metadata.yaml and the .mcap file, the folder holds `MARKER_NAME`, a
+small text file naming the files written: `check_bag_dir(..., overwrite=True)`
+replaces a folder only when that file proves this module made it and the
+folder holds nothing else, so no user's folder is ever deleted.
 """
 
 from __future__ import annotations
@@ -27,7 +32,8 @@ from __future__ import annotations
 import json
 import math
 import os
-import shutil
+import stat
+import tempfile
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -37,7 +43,7 @@ from jaxfilters import constants, ros
 from jaxfilters.grid import OccupancyGrid
 from jaxfilters.types import FilterInfo
 
-__all__ = ["BagError", "FleetRecording", "check_bag_dir", "host_recording", "write_fleet_bag"]
+__all__ = ["MARKER_HEADER", "MARKER_NAME", "BagError", "FleetRecording", "bag_files", "check_bag_dir", "host_recording", "remove_bag", "write_fleet_bag"]
 
 MAP_TOPIC = "/map"
 KEEPOUT_MASK_TOPIC = "/keepout_filter_mask"
@@ -130,43 +136,126 @@ def host_recording(chunks, *, robots: int, step_seconds: float) -> FleetRecordin
       costmap_resolution=np.concatenate(cres) if costs else np.zeros((0, 0), np.float32))
 
 
+# Every bag folder `write_fleet_bag` makes holds this file: a fixed first line, then the names of the
+# files it wrote. `--overwrite` replaces a folder only when the marker proves the tool made it and
+# the folder holds nothing but those regular files.
+MARKER_NAME = ".jaxfilters_fleet_bag"
+MARKER_HEADER = "jaxfilters fleet bag: written by sims.record.bag.write_fleet_bag, replaced only by it (--overwrite)"
+_MARKER_MAX_BYTES = 4096
+
+
+def _bag_error(path, text: str) -> BagError:
+  return BagError(f"--bag {os.fspath(path)}: {text}")
+
+
+def _regular(path: Path) -> bool:
+  """A regular file itself (lstat: a symbolic link, FIFO or folder is not)."""
+  return stat.S_ISREG(os.lstat(path).st_mode)
+
+
+def bag_files(path: str | os.PathLike) -> list[str]:
+  """The files of a bag folder this module wrote, all that `--overwrite` may remove.
+
+  Args:
+    path: an existing folder.
+
+  Returns:
+    Every entry's name (the marker, metadata.yaml, the .mcap file).
+
+  Raises:
+    BagError: the folder is not one `write_fleet_bag` made (no marker, a marker
+      that is not ours, an entry the marker does not list, an entry that is not a
+      regular file), so nothing in it may be removed.
+  """
+  path = Path(path)
+  refuse = ("holds files other than a bag this tool wrote; --overwrite replaces only a folder made by "
+            f"jaxfilters fleet --bag (with its {MARKER_NAME} file, metadata.yaml and the .mcap file, nothing else)")
+  try:
+    names = sorted(os.listdir(path))
+    if MARKER_NAME not in names or not _regular(path / MARKER_NAME):
+      raise _bag_error(path, f"{refuse}: no {MARKER_NAME} file")
+    with open(path / MARKER_NAME, "rb") as f:     # a regular file (checked above): reading cannot block
+      raw = f.read(_MARKER_MAX_BYTES + 1)
+  except OSError as e:
+    raise _bag_error(path, f"cannot read it ({e.strerror or e})") from None
+  try:
+    lines = raw.decode("utf-8").split("\n")
+  except UnicodeDecodeError:
+    lines = []
+  listed = {n for n in lines[1:] if n}
+  if len(raw) > _MARKER_MAX_BYTES or not lines or lines[0] != MARKER_HEADER or not listed or \
+      not all(n == "metadata.yaml" or (n.endswith(".mcap") and "/" not in n and n != ".mcap") for n in listed):
+    raise _bag_error(path, f"{refuse}: {MARKER_NAME} is not one this tool writes")
+  for name in names:
+    if name != MARKER_NAME and name not in listed:
+      raise _bag_error(path, f"{refuse}: it holds {name!r}")
+    try:
+      if not _regular(path / name):
+        raise _bag_error(path, f"{refuse}: {name!r} is not a regular file")
+    except OSError as e:
+      raise _bag_error(path, f"cannot read it ({e.strerror or e})") from None
+  return names
+
+
 def check_bag_dir(path: str | os.PathLike, *, overwrite: bool = False) -> Path:
   """Checks, before a run, that a bag folder can be written at `path`.
 
   Args:
-    path: the bag folder: new, or an existing empty folder, or (overwrite) an
-      existing rosbag2 folder to replace (one that holds only metadata.yaml and
-      .mcap/.db3 files: nothing else is ever deleted).
+    path: the bag folder: new, or an existing empty folder, or (overwrite) a
+      bag folder `write_fleet_bag` made (`bag_files`: nothing else is ever deleted).
     overwrite: replace an existing non-empty folder.
 
   Returns:
     The path.
 
   Raises:
-    BagError: a file is in the way (at the path or one of its parents), the
-      folder is not empty (without overwrite) or not a bag folder (with it),
-      or the nearest existing folder is not writable (missing parents are
-      created when the bag is written).
+    BagError: an empty path, a symbolic link, the current folder or one holding
+      it, a file in the way (at the path or one of its parents), a folder that is
+      not empty (without overwrite) or not a bag this module wrote (with it), or
+      a place where no folder can be created (the nearest existing folder is
+      probed; missing parents are created when the bag is written).
+  """
+  if os.fspath(path) == "":
+    raise BagError("--bag must name a folder; got ''")
+  path = target = Path(path)
+  try:
+    if path.is_symlink():
+      raise _bag_error(path, "is a symbolic link; name the folder itself")
+    if path.exists() and not path.is_dir():
+      raise _bag_error(path, "exists and is not a folder")
+    here, target = Path.cwd().resolve(), path.resolve()
+    if here == target or target in here.parents:
+      raise _bag_error(path, "is the current folder or holds it; name a new folder for the bag")
+    if path.is_dir() and any(path.iterdir()):
+      if not overwrite:
+        raise _bag_error(path, "folder is not empty (pass --overwrite to replace a bag this tool wrote)")
+      bag_files(path)
+    target = target.parent                   # the folder is (re)made there: rosbag2's writer creates it
+    while not target.exists():               # missing parents are created when the bag is written
+      target = target.parent
+    if not target.is_dir():
+      raise _bag_error(path, f"{target} is not a folder")
+    os.rmdir(tempfile.mkdtemp(prefix=".jaxfilters_probe_", dir=target))
+  except OSError as e:
+    raise _bag_error(path, f"cannot create a folder in {target} ({e.strerror or e})") from None
+  except ValueError as e:
+    if isinstance(e, BagError):
+      raise
+    raise BagError(f"--bag {os.fspath(path)!r}: not a usable path ({e})") from None
+  return path
+
+
+def remove_bag(path: str | os.PathLike) -> None:
+  """Removes a bag folder `bag_files` accepts: its listed files one by one, then the (empty) folder.
+
+  Raises:
+    BagError: the folder is not one this module wrote (nothing is removed).
+    OSError: the folder changed meanwhile (a new entry: the folder stays).
   """
   path = Path(path)
-  if path.exists() and not path.is_dir():
-    raise BagError(f"--bag {path}: exists and is not a folder")
-  if path.is_dir() and any(path.iterdir()):
-    if not overwrite:
-      raise BagError(f"--bag {path}: folder is not empty (pass --overwrite to replace it)")
-    names = {p.name for p in path.iterdir()}
-    if "metadata.yaml" not in names or any(not (n == "metadata.yaml" or n.endswith((".mcap", ".db3")))
-                                           for n in names):
-      raise BagError(f"--bag {path}: holds files other than a rosbag2 bag's; --overwrite replaces only a bag "
-                     "folder (metadata.yaml and .mcap/.db3 files)")
-  target = path.resolve()
-  while not target.exists():               # missing parents are created when the bag is written
-    target = target.parent
-  if not target.is_dir():
-    raise BagError(f"--bag {path}: {target} is not a folder")
-  if not os.access(target, os.W_OK | os.X_OK):
-    raise BagError(f"--bag {path}: {target} is not writable")
-  return path
+  for name in bag_files(path):
+    os.unlink(path / name)
+  os.rmdir(path)              # fails, removing nothing more, if anything appeared meanwhile
 
 
 def _stamp(t: float) -> dict:
@@ -246,10 +335,12 @@ def write_fleet_bag(path: str | os.PathLike, scenario, rec: FleetRecording, *, m
     rec: FleetRecording (`host_recording`).
     max_speed: the robots' maximum speed (m/s), the `/robot_<i>/speed_cap` value where no limit holds.
     summary: the run's summary (JSON-serialisable) for `/fleet/summary`.
-    overwrite: replace an existing non-empty folder.
+    overwrite: replace a bag folder this function wrote earlier (`bag_files`).
 
   Returns:
-    The bag folder.
+    The bag folder: metadata.yaml, the .mcap file and the marker MARKER_NAME
+    (the names of the files written), which lets a later `overwrite` prove the
+    folder is a bag this function made.
 
   Raises:
     BagError: the folder cannot be written (see `check_bag_dir`).
@@ -258,8 +349,13 @@ def write_fleet_bag(path: str | os.PathLike, scenario, rec: FleetRecording, *, m
   path = check_bag_dir(path, overwrite=overwrite)
   messages = fleet_messages(scenario, rec, max_speed=max_speed, summary=summary)
   if path.is_dir():
-    shutil.rmtree(path)
+    if any(path.iterdir()):
+      remove_bag(path)
+    else:
+      os.rmdir(path)
   path.parent.mkdir(parents=True, exist_ok=True)
   latched = (MAP_TOPIC, KEEPOUT_MASK_TOPIC, SPEED_MASK_TOPIC, KEEPOUT_INFO_TOPIC, SPEED_INFO_TOPIC)
   ros.write_bag(path, messages, storage="mcap", latched=latched)
+  written = sorted(os.listdir(path))
+  (path / MARKER_NAME).write_text("\n".join([MARKER_HEADER, *written]) + "\n", encoding="utf-8")
   return path

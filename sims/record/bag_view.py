@@ -10,9 +10,12 @@ of the fleet pictures (`sims.record.render.draw_scenario`).
 
 from __future__ import annotations
 
+import os
+import stat
 from pathlib import Path
 
 import numpy as np
+import yaml
 from matplotlib import colormaps
 from matplotlib.backends.backend_agg import FigureCanvasAgg
 from matplotlib.figure import Figure
@@ -22,7 +25,62 @@ from sims.record import render
 from sims.record.bag import KEEPOUT_MASK_TOPIC, MAP_TOPIC, SPEED_INFO_TOPIC, SPEED_MASK_TOPIC
 from sims.fleet.scenario import Scenario
 
-__all__ = ["bag_figure", "render_bag_png"]
+__all__ = ["MAX_METADATA_BYTES", "bag_figure", "check_bag_files", "render_bag_png"]
+
+MAX_METADATA_BYTES = 2 ** 20
+
+
+def _regular_file(path: str, what: str) -> os.stat_result:
+  """os.stat of a regular file (following links), or ValueError: a FIFO, device or folder is never opened."""
+  try:
+    st = os.stat(path)
+  except FileNotFoundError:
+    raise FileNotFoundError(f"{what} {path} does not exist") from None
+  except OSError as e:
+    raise ValueError(f"{what} {path}: cannot read it ({e.strerror or e})") from None
+  if not stat.S_ISREG(st.st_mode):
+    raise ValueError(f"{what} {path} is not a regular file (a FIFO, device or folder is refused)")
+  return st
+
+
+def check_bag_files(path) -> None:
+  """Checks a rosbag2 folder's files before any is opened, so that reading it cannot block or flood.
+
+  metadata.yaml must be a regular file of at most MAX_METADATA_BYTES holding
+  valid YAML with `rosbag2_bagfile_information.relative_file_paths`, and every
+  file it names, and every .mcap/.db3 file in the folder, a regular file.
+
+  Raises:
+    FileNotFoundError: no such folder, no metadata.yaml, or a named file missing.
+    ValueError: anything else wrong (one line naming the file).
+  """
+  path = os.fspath(path)
+  if not os.path.isdir(path):
+    raise FileNotFoundError(f"rosbag2 folder {path} does not exist" if not os.path.exists(path) else
+                            f"{path} is not a folder (a rosbag2 bag is a folder)")
+  meta = os.path.join(path, "metadata.yaml")
+  st = _regular_file(meta, "rosbag2 metadata")
+  if st.st_size > MAX_METADATA_BYTES:
+    raise ValueError(f"{meta} is {st.st_size} bytes; a bag's metadata.yaml is at most {MAX_METADATA_BYTES}")
+  with open(meta, "rb") as f:        # a regular file (checked): reading cannot block
+    raw = f.read(MAX_METADATA_BYTES + 1)
+  try:
+    doc = yaml.safe_load(raw.decode("utf-8"))
+  except UnicodeDecodeError as e:
+    raise ValueError(f"{meta} is not UTF-8 text (byte {e.start})") from None
+  except yaml.YAMLError as e:
+    mark = getattr(e, "problem_mark", None)
+    where = "" if mark is None else f" at line {mark.line + 1}, column {mark.column + 1}"
+    problem = str(getattr(e, "problem", None) or type(e).__name__).replace("\n", " ")
+    raise ValueError(f"{meta} is not valid YAML{where}: {problem}") from None
+  info = doc.get("rosbag2_bagfile_information") if isinstance(doc, dict) else None
+  files = info.get("relative_file_paths") if isinstance(info, dict) else None
+  if not isinstance(files, list) or not all(isinstance(n, str) and n for n in files):
+    raise ValueError(f"{meta} is not rosbag2 metadata: it needs rosbag2_bagfile_information."
+                     "relative_file_paths, a list of file names")
+  names = set(files) | {n for n in os.listdir(path) if n.endswith((".mcap", ".db3"))}
+  for name in sorted(names):
+    _regular_file(os.path.join(path, name), "bag file")
 
 
 def _by_topic(path) -> dict[str, list]:
@@ -80,8 +138,11 @@ def bag_figure(path, *, robot: int | None = None, width_in: float = 13.0, dpi: f
     A matplotlib Figure on an Agg canvas.
 
   Raises:
-    ValueError: not a fleet bag, or no such robot in it.
+    FileNotFoundError: no such folder or file (`check_bag_files`).
+    ValueError: a file that is not a regular file or malformed metadata.yaml
+      (`check_bag_files`), not a fleet bag, or no such robot in it.
   """
+  check_bag_files(path)
   msgs = _by_topic(path)
   scenario = _scenario(msgs)
   t, xy = _tracks(msgs)

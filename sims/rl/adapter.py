@@ -18,6 +18,8 @@ from gymnax.environments import spaces
 
 from sims.rl.env import NavEnv
 
+MAX_EPISODE_LENGTH = 2 ** 24   # EpisodeWrapper's step count is float32: exact up to 2**24
+
 
 @struct.dataclass
 class AdapterParams:
@@ -55,8 +57,10 @@ class GymnaxAdapter:
 
   def __init__(self, env: NavEnv, episode_length: int,
                randomization_fn: Callable | None = None, *, full_reset: bool = False):
-    if isinstance(episode_length, bool) or int(episode_length) != episode_length or episode_length < 1:
-      raise ValueError(f"episode_length must be an integer >= 1; got {episode_length!r}")
+    if isinstance(episode_length, bool) or int(episode_length) != episode_length or \
+        not 1 <= episode_length <= MAX_EPISODE_LENGTH:
+      raise ValueError(f"episode_length must be an integer in [1, 2**24] (EpisodeWrapper counts the steps in "
+                       f"float32, exact to 2**24); got {episode_length!r}")
     self.env = env
     self.wrapped = EpisodeWrapper(env, int(episode_length), 1)
     self.episode_length = int(episode_length)

@@ -99,6 +99,7 @@ from sims.fleet.world import STATIC_LAYER, WorldParams
 _F32 = jnp.float32
 MODES = ("velocity", "navigation")
 KEEPOUT_MODES = ("terminate", "penalty")
+MAX_LAYOUTS = 1024         # zone layouts in a bank: each is a world built on the host, with map-sized masks
 AHEAD = (0.25, 0.5, 1.0)   # m, points ahead where the observation reads the speed limit
 State = mjx_env.State
 
@@ -237,7 +238,7 @@ class NavEnv(mjx_env.MjxEnv):
       fleet_config: FleetConfig (default: FleetConfig(robots_per_world=1)).
       config: NavEnvConfig.
       seed: host seed for station and spawn selection.
-      layouts: L >= 1 zone layouts in the bank (`sims.fleet.layouts`): 1 is the scenario's own zones;
+      layouts: L in [1, MAX_LAYOUTS] zone layouts in the bank (`sims.fleet.layouts`): 1 is the scenario's own zones;
         more adds random keepout and speed zones (velocity mode only), drawn per env by
         `sims.rl.randomization.randomize_zones_and_goals`.
       layout_seed: host seed of the random layouts (different seeds give layouts never seen
@@ -256,6 +257,8 @@ class NavEnv(mjx_env.MjxEnv):
       raise TypeError(f"fleet_config must be a FleetConfig; got {type(fleet_config).__name__}")
     if isinstance(layouts, bool) or not isinstance(layouts, (int, np.integer)) or layouts < 1:
       raise ValueError(f"layouts must be an integer >= 1; got {layouts!r}")
+    if layouts > MAX_LAYOUTS:
+      raise ValueError(f"layouts must be at most {MAX_LAYOUTS} (each is a world built on the host); got {layouts!r}")
     fleet = FleetEnv.create(scenario, fleet_config, seed=seed)
     if layouts == 1:
       return cls(fleet, config)

@@ -109,6 +109,8 @@ from sims.rl.env import NavEnv
 
 OBS_BOUND = 1.0 + 1e-4      # Box bound of every observation entry (normalised to [-1, 1], plus rounding room)
 DEFAULT_EPISODE_LENGTH = 150  # env steps of 0.2 s (30 s), the PPO trainer's default
+MAX_NUM_ENVS = 2 ** 21        # envs of one NavVectorEnv (`jaxfilters rl train --num-envs` has the same bound)
+MAX_EPISODE_LENGTH = 2 ** 24  # Brax's EpisodeWrapper counts an episode's steps in float32 (exact to 2**24)
 
 
 # ----------------------------------------------------------------------------- shared checks
@@ -125,8 +127,10 @@ def _resolve(env, episode_length, randomize, randomization_fn, render_mode, who)
                      f"(model_v, in_axes)); got {type(randomization_fn).__name__}")
   if randomization_fn is not None and not randomize:
     raise ValueError(f"{who}: randomization_fn is used only with randomize=True; pass both")
-  if isinstance(episode_length, bool) or not isinstance(episode_length, numbers.Integral) or episode_length < 1:
-    raise ValueError(f"{who}: episode_length must be an integer >= 1 (env steps); got {episode_length!r}")
+  if isinstance(episode_length, bool) or not isinstance(episode_length, numbers.Integral) or \
+      not 1 <= episode_length <= MAX_EPISODE_LENGTH:
+    raise ValueError(f"{who}: episode_length must be an integer in [1, 2**24] (env steps, counted in "
+                     f"float32); got {episode_length!r}")
   if env is None:     # the rl commands' env: with randomize, the built-in warehouse and 16 zone layouts
     env, _ = training_env(randomize=randomize, seed=0)
   if not isinstance(env, NavEnv):
@@ -248,7 +252,7 @@ class NavVectorEnv(gymnasium.vector.VectorEnv):
   """N fleet RL envs (velocity mode) as one `gymnasium.vector.VectorEnv`, one jitted JAX call per step.
 
   Args:
-    num_envs: N >= 1.
+    num_envs: N in [1, MAX_NUM_ENVS].
     episode_length: env steps of 0.2 s per episode (the time limit; `truncated`).
     randomize: draw zones and goals per episode (`randomization_fn`, by default
       `sims.rl.randomization.randomize_zones_and_goals`).
@@ -270,6 +274,8 @@ class NavVectorEnv(gymnasium.vector.VectorEnv):
                env: NavEnv | None = None, randomization_fn: Callable | None = None, render_mode: None = None):
     if isinstance(num_envs, bool) or not isinstance(num_envs, numbers.Integral) or num_envs < 1:
       raise ValueError(f"NavVectorEnv: num_envs must be an integer >= 1; got {num_envs!r}")
+    if num_envs > MAX_NUM_ENVS:
+      raise ValueError(f"NavVectorEnv: num_envs must be at most 2**21 = {MAX_NUM_ENVS:,d}; got {num_envs!r}")
     self.env, fn = _resolve(env, episode_length, randomize, randomization_fn, render_mode, "NavVectorEnv")
     self.num_envs = int(num_envs)
     self.episode_length = int(episode_length)

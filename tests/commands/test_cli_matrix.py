@@ -64,7 +64,7 @@ MATRIX = [
     ("fleet --set A=1 --out {out}", 2, "--set needs --params"),
     ("fleet --costmap local_costmap --out {out}", 2, "--costmap needs --params"),
     # fleet: values found wrong only after simulating
-    ("fleet --record-robots 0 --out {out}", 2, "--record-robots must be >= 1"),
+    ("fleet --record-robots 0 --out {out}", 2, "argument --record-robots: must lie in [1, 1,024]; got 0"),
     ("fleet --map {map} --keepout {keepout} --speed {speed} --speed-multiplier 3e38 --out {out}", 2,
      "--speed-base/--speed-multiplier: "),
     ("fleet --map {map} --keepout {keepout} --speed {speed} --speed-type 3 --out {out}", 2, "--speed-type must be 1"),

@@ -208,9 +208,9 @@ def _bad_inputs(tmp: Path) -> dict:
 
 TRAIN = "rl train --timesteps 64 --num-envs 4 --num-steps 8"
 BAD = [
-    ("rl eval --policy {ok} --episodes 0", "--episodes must be >= 1"),
-    (TRAIN + " --num-envs 0 --out {tmp}/o", "--num-envs must be >= 1"),
-    (TRAIN + " --timesteps -1 --out {tmp}/o", "--timesteps must be >= 1"),
+    ("rl eval --policy {ok} --episodes 0", "argument --episodes: must lie in [1, 262,144]; got 0"),
+    (TRAIN + " --num-envs 0 --out {tmp}/o", "argument --num-envs: must lie in [1, 2,097,152]; got 0"),
+    (TRAIN + " --timesteps -1 --out {tmp}/o", "argument --timesteps: must lie in [1, 1,073,741,824]; got -1"),
     (TRAIN + " --devices 3 --out {tmp}/o", "--num-envs (4) must be a multiple of --devices (3)"),
     (TRAIN + " --devices 0 --out {tmp}/o", "--devices must be >= 1"),
     (TRAIN + " --devices many --out {tmp}/o", "--devices must be a positive integer or 'all'"),
@@ -220,7 +220,7 @@ BAD = [
      "--minibatches (8) must divide each device's batch, --num-envs / --devices x --num-steps (1 x 2)"),
     (TRAIN + " --out {full}", "not empty and not an earlier policy folder"),
     (TRAIN + " --seed x --out {tmp}/o", "argument --seed: invalid int value"),
-    ("rl eval --policy {ok} --seed -1", "--seed must lie in [0, 2**32)"),
+    ("rl eval --policy {ok} --seed -1", "argument --seed: must lie in [0, 4,294,967,295]; got -1"),
     ("rl eval --policy {tmp}/missing", "does not exist"),
     ("rl eval --policy {fifo}", "is not a directory"),
     ("rl eval --policy {fifo_pol}", "is a FIFO, not a regular file"),

@@ -167,7 +167,7 @@ def test_nav2_centre_test_traps_where_the_footprint_test_releases(escape_run):
 
 @pytest.mark.parametrize("argv, words", [
     (["--robots-in-keepout", "2"], ["--robots-in-keepout needs --keepout-escape"]),
-    (["--keepout-escape", "footprint", "--robots-in-keepout", "-1"], ["--robots-in-keepout must be >= 0"]),
+    (["--keepout-escape", "footprint", "--robots-in-keepout", "-1"], ["argument --robots-in-keepout: must lie in [0, 1,024]; got -1"]),
     (["--keepout-escape", "footprint", "--robots", "4", "--robots-in-keepout", "5"], ["robots per world (4)"]),
     (["--keepout-escape", "sideways"], ["invalid choice: 'sideways'"]),
 ])

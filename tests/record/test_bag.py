@@ -173,11 +173,14 @@ def test_bag_folder_checks(tmp_path):
   (tmp_path / "full" / "x").write_text("x")
   with pytest.raises(bag_lib.BagError, match="not empty"):
     bag_lib.check_bag_dir(tmp_path / "full")
-  with pytest.raises(bag_lib.BagError, match="other than a rosbag2"):
+  with pytest.raises(bag_lib.BagError, match="other than a bag this tool wrote"):
     bag_lib.check_bag_dir(tmp_path / "full", overwrite=True)       # never deletes a folder that is not a bag
   (tmp_path / "full" / "x").unlink()
   (tmp_path / "full" / "metadata.yaml").write_text("rosbag2_bagfile_information: {}")
   (tmp_path / "full" / "run_0.mcap").write_bytes(b"")
+  with pytest.raises(bag_lib.BagError, match="no .jaxfilters_fleet_bag file"):    # a bag's names, not ours
+    bag_lib.check_bag_dir(tmp_path / "full", overwrite=True)
+  (tmp_path / "full" / bag_lib.MARKER_NAME).write_text(f"{bag_lib.MARKER_HEADER}\nmetadata.yaml\nrun_0.mcap\n")
   assert bag_lib.check_bag_dir(tmp_path / "full", overwrite=True) == tmp_path / "full"
   assert bag_lib.check_bag_dir(tmp_path / "missing" / "bag") == tmp_path / "missing" / "bag"
   with pytest.raises(bag_lib.BagError, match="is not a folder"):
@@ -212,11 +215,11 @@ def test_bag_picture_reads_the_bag(run, tmp_path):
     (["--bag-robots", "2"], "--bag-robots needs --bag"),
     (["--bag-costmaps", "1"], "--bag-costmaps needs --bag"),
     (["--overwrite"], "--overwrite needs --bag"),
-    (["--bag", "{tmp}/b", "--bag-robots", "0"], "--bag-robots must lie in [1, --robots = 4]"),
+    (["--bag", "{tmp}/b", "--bag-robots", "0"], "argument --bag-robots: must lie in [1, 1,048,576]; got 0"),
     (["--bag", "{tmp}/b", "--bag-robots", "5"], "--bag-robots must lie in [1, --robots = 4]"),
     (["--bag", "{tmp}/b", "--bag-robots", "2", "--bag-costmaps", "3"], "--bag-costmaps must lie in [0, bag robots = 2]"),
     (["--bag", "{tmp}/full"], "folder is not empty"),
-    (["--bag", "{tmp}/full", "--overwrite"], "other than a rosbag2"),
+    (["--bag", "{tmp}/full", "--overwrite"], "other than a bag this tool wrote"),
     (["--bag", "{tmp}/file"], "not a folder"),
     (["--bag", "{tmp}/file/b"], "is not a folder"),
     (["--bag", "{tmp}/b", "--devices", "1"], "--bag records on one device"),
