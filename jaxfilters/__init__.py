@@ -17,7 +17,7 @@ from jaxfilters.keepout import (KeepoutConfig, KeepoutState, keepout_filter, kee
 from jaxfilters.map_io import (MAX_MAP_CELLS, MapMetadata, load_map, load_map_image,
                                load_map_with_metadata, save_map)
 from jaxfilters.pipeline import LayersConfig, costmap_pipeline
-from jaxfilters.nav2 import (Nav2BinaryFilter, Nav2Costmap, Nav2Filter, Nav2KeepoutFilter, Nav2Params,
+from jaxfilters.nav2 import (Nav2BinaryFilter, Nav2Costmap, Nav2Filter, Nav2InflationLayer, Nav2KeepoutFilter, Nav2Params,
                              Nav2ParamsError, Nav2ParamsWarning, Nav2Readout, Nav2SpeedFilter, Nav2ZoneFilter,
                              ZoneSetpoint, ZoneStateConfig, load_params)
 from jaxfilters.query import binary_at, keepout_cost_at, speed_limit_at, zone_at
@@ -35,7 +35,7 @@ __all__ = [
     "__version__", "AsymmetricInflationConfig", "BinaryResult", "BinaryState", "Circle", "Costmap", "FilterInfo", "FilterMask",
     "InflationConfig", "KeepoutConfig", "KeepoutState", "LayersConfig", "LookaheadConfig",
     "MAX_MAP_CELLS", "MapMetadata", "Nav2BinaryFilter", "Nav2Costmap", "Nav2Filter",
-    "Nav2KeepoutFilter", "Nav2Params", "Nav2ParamsError", "Nav2ParamsWarning", "Nav2Readout",
+    "Nav2InflationLayer", "Nav2KeepoutFilter", "Nav2Params", "Nav2ParamsError", "Nav2ParamsWarning", "Nav2Readout",
     "Nav2SpeedFilter", "Nav2ZoneFilter", "OVERLAY_MAX", "OVERLAY_MIN", "OVERLAY_SEQ", "OccupancyGrid", "Polygon",
     "RasterResult", "Shapes", "SpeedResult", "SpeedState", "StaticLayerConfig", "ZoneResult",
     "ZoneSetpoint", "ZoneState", "ZoneStateConfig", "ZoneTable", "asymmetric_inflate", "binary_at", "binary_filter",
