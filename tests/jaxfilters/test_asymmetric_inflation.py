@@ -274,3 +274,27 @@ def test_obstacles_exactly_one_radius_from_the_path_are_seeds():
     sym = ref.symmetric_pass(costs[k], r_cells=4, lut=ref.cost_lut(4, res, 0.0, 6.0), inflate_unknown=False,
                              inflate_around_unknown=False)
     assert (out[k] > sym).any(), f"robot {k}: the wall one radius away did not seed pass 2"
+
+
+def test_pass_one_is_nav2_inflation_layer_on_inflation_tests_cpp():
+  """inflation_tests.cpp testInflation3 (docs/nav2_semantics.md §9.5): 10 x 10 cells of 1 m, inscribed
+  radius 1.0, scaling 1.0, radius 3, one obstacle at (5, 5). With equal factors the asymmetric layer is
+  that InflationLayer whatever the path; with unequal ones and the obstacle beyond every segment's
+  reach, pass 1 alone runs with max(left, right)."""
+  want = np.array([[0, 0, 0, 34, 0, 0, 0],
+                   [0, 40, 72, 92, 72, 40, 0],
+                   [0, 72, 167, 253, 167, 72, 0],
+                   [34, 92, 253, 254, 253, 92, 34],
+                   [0, 72, 167, 253, 167, 72, 0],
+                   [0, 40, 72, 92, 72, 40, 0],
+                   [0, 0, 0, 34, 0, 0, 0]], np.uint8)[::-1]        # row 0 = lowest y
+  cost = np.zeros((10, 10), np.uint8)
+  cost[5, 5] = 254
+  far = [(0.5, 9.5), (1.5, 9.5)]                                  # > 3 m from (5.5, 5.5)
+  for left, right, path in ((1.0, 1.0, [(0.5, 5.5), (9.5, 5.5)]), (1.0, 0.5, far)):
+    cfg = jf.AsymmetricInflationConfig(inflation_radius=3.0, cost_scaling_factor_left=left,
+                                       cost_scaling_factor_right=right, goal_distance_threshold=0.0,
+                                       inscribed_radius=1.0, resolution=1.0)
+    out = _run(cost[None], [path], cfg, robots=[(0.0, 0.0)])[0]
+    np.testing.assert_array_equal(out[2:9, 2:9], want)
+    assert np.count_nonzero(out) == 29

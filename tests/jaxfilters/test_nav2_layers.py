@@ -201,3 +201,36 @@ def test_parse_footprint():
   for bad in ("[]", "[[0.1, 0.2], [0.3, 0.4]]", "[[0.1, 0.2, 0.3], [1, 2], [3, 4]]", "[[a, 1], [1, 2], [3, 4]]",
               "0.1, 0.2", "[[1, 2] [3, 4], [5, 6]]"):
     assert parse_footprint(bad) is None, bad
+
+
+def test_bringup_file_switched_to_the_new_plugin(nav2_maps, tmp_path):
+  """Nav2's bringup file with the local costmap's inflation layer switched to the AsymmetricInflationLayer
+  (plugin line and the lane parameters added, as a user would) loads without a warning."""
+  text = (nav2_maps / "nav2_params.yaml").read_text()
+  old = '''      inflation_layer:
+        plugin: "nav2_costmap_2d::InflationLayer"
+        cost_scaling_factor: 3.0
+        inflation_radius: 0.70
+'''
+  assert text.count(old) == 1
+  new = '''      inflation_layer:
+        plugin: "nav2_costmap_2d::AsymmetricInflationLayer"
+        cost_scaling_factor_left: 3.0
+        cost_scaling_factor_right: 6.0
+        inflation_radius: 0.70
+        goal_distance_threshold: 1.0
+'''
+  path = tmp_path / "nav2_params.yaml"
+  path.write_text(text.replace(old, new))
+  masks = {"keepout_filter_mask_server": nav2_maps / "warehouse_keepout.yaml",
+           "speed_filter_mask_server": nav2_maps / "warehouse_speed.yaml"}
+  with warnings.catch_warnings():
+    warnings.simplefilter("error")
+    p = nav2.load_params(path, masks=masks, substitutions=_ENABLE)
+  lane = p.local_costmap.asymmetric_inflation
+  assert p.local_costmap.inflation is None and lane.name == "inflation_layer" and lane.plan_topic == "/plan"
+  assert lane.config == jf.AsymmetricInflationConfig(
+      inflation_radius=0.70, cost_scaling_factor_left=3.0, cost_scaling_factor_right=6.0,
+      goal_distance_threshold=1.0, inscribed_radius=jf.footprint_radii(robot_radius=0.22, footprint_padding=PAD)[0],
+      resolution=0.05)
+  assert p.global_costmap.inflation.config.cost_scaling_factor == 3.0
