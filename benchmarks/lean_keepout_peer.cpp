@@ -7,7 +7,8 @@
 //
 // Per cell, columns outer and rows inner as in Nav2: the cell centre, the transform into the
 // mask frame (different frames only), the bounded mask lookup, getMaskCost and the write
-// rule `data != 255 and (data > old or old == 255)`. The same C signature as
+// rule `data != 255 and (data > old or (old == 255 and data >= 253))` (Nav2 main since PR
+// #6329). The same C signature as
 // nav2_keepout_batch, so benchmarks/nav2_peer.py runs and checks both; the window, the
 // lethal-override arguments and `ran` are ignored (the benchmarks visit the whole map).
 //
@@ -58,7 +59,7 @@ int lean_keepout_batch(int b, int h, int w, unsigned char* cost, const double* o
         if (v < 0 || v > 100) continue;                 // unknown: NO_INFORMATION is never written
         const unsigned char data = static_cast<unsigned char>(std::round(v * 254.0 / 100.0));
         unsigned char& old = c[j * w + i];
-        if (data > old || old == 255) old = data;
+        if (data > old || (old == 255 && data >= 253)) old = data;
       }
     }
   }

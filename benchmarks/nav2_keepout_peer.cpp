@@ -9,7 +9,8 @@
 //   * per cell, columns outer and rows inner like Nav2: mapToWorld (the cell centre),
 //     the transform R(yaw) p + t into the mask frame (different frames only), the bounded
 //     worldToMap on the mask, getMaskCost (round(2.54 d), -1 -> 255), and the write rule
-//     `data != 255 and (data > old or old == 255)`, writing lethal_override_cost in escape mode.
+//     `data != 255 and (data > old or (old == 255 and data >= 253))` (Nav2 main since PR #6329),
+//     writing lethal_override_cost in escape mode.
 // Nav2's tf2 rotates with a matrix built from a quaternion; this peer uses cos/sin of the
 // yaw like reference/nav2.py, so its integers can be checked against the reference bit for
 // bit (the work per cell is the same: 4 multiplies and 4 adds).
@@ -24,6 +25,7 @@
 namespace {
 
 constexpr unsigned char kNoInformation = 255;
+constexpr unsigned char kInscribed = 253;   // INSCRIBED_INFLATED_OBSTACLE
 
 // getMaskCost (docs/nav2_semantics.md §1.4): OccupancyGrid value -> cost; unknown (-1), and values outside
 // 0..100 (undefined in Nav2, unknown in jaxfilters), give NO_INFORMATION.
@@ -98,7 +100,9 @@ int ProcessOne(unsigned char* cost, int h, int w, double ox, double oy, double r
       if (!WorldToMask(wx, wy, mox, moy, mres, wm, hm, &mx, &my)) continue;
       const unsigned char data = MaskCost(mask[static_cast<int64_t>(my) * wm + mx]);
       if (data == kNoInformation) continue;
-      if (data > old || old == kNoInformation) cost[index] = override_now ? override_cost : data;
+      if (data > old || (old == kNoInformation && data >= kInscribed)) {
+        cost[index] = override_now ? override_cost : data;
+      }
     }
   }
   return 1;

@@ -7,6 +7,7 @@ public functions take an explicit leading robot axis B.
 
 from jaxfilters import constants, jaus, ros
 from jaxfilters._version import __version__
+from jaxfilters.asymmetric_inflation import AsymmetricInflationConfig, asymmetric_inflate
 from jaxfilters.binary import BinaryResult, BinaryState, binary_filter
 from jaxfilters.geometry import world_to_cell
 from jaxfilters.grid import OccupancyGrid
@@ -16,7 +17,7 @@ from jaxfilters.keepout import (KeepoutConfig, KeepoutState, keepout_filter, kee
 from jaxfilters.map_io import (MAX_MAP_CELLS, MapMetadata, load_map, load_map_image,
                                load_map_with_metadata, save_map)
 from jaxfilters.pipeline import LayersConfig, costmap_pipeline
-from jaxfilters.nav2 import (Nav2BinaryFilter, Nav2Costmap, Nav2Filter, Nav2KeepoutFilter, Nav2Params,
+from jaxfilters.nav2 import (Nav2BinaryFilter, Nav2Costmap, Nav2Filter, Nav2InflationLayer, Nav2KeepoutFilter, Nav2Params,
                              Nav2ParamsError, Nav2ParamsWarning, Nav2Readout, Nav2SpeedFilter, Nav2ZoneFilter,
                              ZoneSetpoint, ZoneStateConfig, load_params)
 from jaxfilters.query import binary_at, keepout_cost_at, speed_limit_at, zone_at
@@ -31,13 +32,13 @@ from jaxfilters.types import Costmap, FilterInfo, FilterMask
 from jaxfilters.zone import ZoneResult, ZoneState, ZoneTable, zone_filter
 
 __all__ = [
-    "__version__", "BinaryResult", "BinaryState", "Circle", "Costmap", "FilterInfo", "FilterMask",
+    "__version__", "AsymmetricInflationConfig", "BinaryResult", "BinaryState", "Circle", "Costmap", "FilterInfo", "FilterMask",
     "InflationConfig", "KeepoutConfig", "KeepoutState", "LayersConfig", "LookaheadConfig",
     "MAX_MAP_CELLS", "MapMetadata", "Nav2BinaryFilter", "Nav2Costmap", "Nav2Filter",
-    "Nav2KeepoutFilter", "Nav2Params", "Nav2ParamsError", "Nav2ParamsWarning", "Nav2Readout",
+    "Nav2InflationLayer", "Nav2KeepoutFilter", "Nav2Params", "Nav2ParamsError", "Nav2ParamsWarning", "Nav2Readout",
     "Nav2SpeedFilter", "Nav2ZoneFilter", "OVERLAY_MAX", "OVERLAY_MIN", "OVERLAY_SEQ", "OccupancyGrid", "Polygon",
     "RasterResult", "Shapes", "SpeedResult", "SpeedState", "StaticLayerConfig", "ZoneResult",
-    "ZoneSetpoint", "ZoneState", "ZoneStateConfig", "ZoneTable", "binary_at", "binary_filter",
+    "ZoneSetpoint", "ZoneState", "ZoneStateConfig", "ZoneTable", "asymmetric_inflate", "binary_at", "binary_filter",
     "constants", "costmap_pipeline", "footprint_radii", "inflate", "jaus", "keepout_cost_at",
     "keepout_filter", "keepout_update_bounds", "load_map", "load_map_image",
     "load_map_with_metadata", "load_params", "occ_to_cost", "rasterize", "rasterize_mask", "ros",

@@ -36,8 +36,14 @@ def no_bounds(w, o, res):
 
 
 def keepout_process(cost, origin, res, mask, mask_origin, mask_res, window, *, is_pose_lethal=False,
-                    override=False, override_cost=252, transform=None, enabled=True):
-  """KeepoutFilter::process. Returns (new cost, ran) where ran=False on an early return."""
+                    override=False, override_cost=252, transform=None, enabled=True, unknown_overwrite="inscribed"):
+  """KeepoutFilter::process. Returns (new cost, ran) where ran=False on an early return.
+
+  unknown_overwrite: "inscribed" (Nav2 main, PR #6329: an unknown old cell is written only
+  when the mask cost is >= 253) or "any" (before #6329: whenever the mask cost is known).
+  """
+  if unknown_overwrite not in ("inscribed", "any"):
+    raise ValueError(f"unknown_overwrite must be 'inscribed' or 'any'; got {unknown_overwrite!r}")
   cost = np.array(cost, dtype=np.int64)
   if not enabled:
     return cost.astype(np.uint8), False
@@ -74,7 +80,7 @@ def keepout_process(cost, origin, res, mask, mask_origin, mask_res, window, *, i
       data = mask_cost(mask[cell[1], cell[0]])
       if data == NO_INFORMATION:
         continue
-      if data > old or old == NO_INFORMATION:
+      if data > old or (old == NO_INFORMATION and (unknown_overwrite == "any" or data >= 253)):
         cost[j, i] = override_cost if (override and is_pose_lethal) else data
   return cost.astype(np.uint8), True
 

@@ -12,6 +12,7 @@ import dataclasses
 import jax
 import jax.numpy as jnp
 
+from jaxfilters import constants
 from jaxfilters.keepout.config import KeepoutConfig, KeepoutState, mask_cost_plus_one_table
 from jaxfilters.types import (Costmap, FilterMask, check_costmap, check_state_batch, costmap_geometry_ok,
                               mask_geometry_ok, robot_inputs)
@@ -51,7 +52,9 @@ def write_u8(cost, d, visit, state, config):
 
   With c1 = cost + 1 and m1 = mask cost + 1 (0 where unknown or not visited), both
   wrapping 255 to 0, `mask != 255 and (mask > old or old == 255)` is `m1 > c1` and
-  the written value max(c1, m1) - 1 (`m1_rule_u8`).
+  the written value max(c1, m1) - 1 (`m1_rule_u8`). With
+  `KeepoutConfig.unknown_overwrite="inscribed"` an unknown old cell (c1 = 0)
+  compares as c1 = 253, so only m1 >= 254 (mask cost >= 253) overwrites it.
   """
   known, mc = mask_cost_u8(d)
   m1 = jnp.where(visit & known, mc + jnp.uint8(1), jnp.uint8(0))
@@ -203,10 +206,22 @@ def m1_table(data):
   return jnp.asarray(_COST1)[jax.lax.bitcast_convert_type(data, jnp.uint8).astype(jnp.int32)]
 
 
+def old_plus_one_u8(cost, unknown_overwrite: str):
+  """c1 of the write rule `m1 > c1` for old costs (uint8, any shape): cost + 1, wrapping 255 to 0,
+  except that with unknown_overwrite "inscribed" (`KeepoutConfig`) an unknown cell gives
+  INSCRIBED_INFLATED_OBSTACLE (253), as an old 252 would: m1 > 253 iff the mask cost is >= 253."""
+  c1 = cost + jnp.uint8(1)
+  if unknown_overwrite == "inscribed":
+    c1 = jnp.where(c1 == jnp.uint8(0), jnp.uint8(constants.INSCRIBED_INFLATED_OBSTACLE), c1)
+  return c1
+
+
 def m1_rule_u8(cost, m1, state, config: KeepoutConfig):
   """Nav2's write rule on (mask cost + 1) bytes m1 (0: unknown or not visited), uint8 [H, W]."""
-  c1 = cost + jnp.uint8(1)
+  c1 = old_plus_one_u8(cost, config.unknown_overwrite)
   if config.override_lethal_cost:
     value = jnp.where(state.is_pose_lethal, jnp.uint8(config.lethal_override_cost), m1 - jnp.uint8(1))
     return jnp.where(m1 > c1, value, cost)
+  if config.unknown_overwrite == "inscribed":
+    return jnp.where(m1 > c1, m1 - jnp.uint8(1), cost)
   return jnp.maximum(c1, m1) - jnp.uint8(1)

@@ -15,6 +15,8 @@ from jaxfilters.keepout.pallas import PallasTuning
 from jaxfilters.types import pytree_dataclass
 
 _F32 = jnp.float32
+UNKNOWN_OVERWRITES = pallas.UNKNOWN_OVERWRITES
+"""The values of `KeepoutConfig.unknown_overwrite`."""
 EMPTY_BOX = (np.inf, np.inf, -np.inf, -np.inf)
 """The empty world box (min_x, min_y, max_x, max_y) of `KeepoutState.acc_box`."""
 
@@ -78,6 +80,14 @@ class KeepoutConfig:
       the footprint grown by this distance is clear of lethal cells
       (`footprint.band_clearance` gives the value that leaves the robot's
       centre cell outside the zone's inscribed band).
+    unknown_overwrite: which known mask costs overwrite a master cell that is
+      unknown (NO_INFORMATION, 255) (docs/nav2_semantics.md §4.4). "inscribed"
+      (default, Nav2 main since PR #6329, `KeepoutFilter::process`): only a mask
+      cost >= 253 (INSCRIBED_INFLATED_OBSTACLE or LETHAL_OBSTACLE), so free and
+      low-cost mask cells leave unknown space unknown; the rule is
+      `data > old || (old == NO_INFORMATION && data >= 253)`. "any" (Nav2
+      before #6329): every known mask cost, `data > old || old == NO_INFORMATION`.
+      Known master cells are raised the same way under both.
   """
   override_lethal_cost: bool = False
   lethal_override_cost: int = constants.MAX_NON_OBSTACLE
@@ -90,6 +100,7 @@ class KeepoutConfig:
   robot_radius: float | None = None
   min_mask_resolution: float | None = None
   escape_clearance: float = 0.0
+  unknown_overwrite: str = "inscribed"
 
   @property
   def footprint_window(self) -> int:
@@ -100,6 +111,7 @@ class KeepoutConfig:
                                       self.min_mask_resolution)
 
   def __post_init__(self):
+    pallas.check_unknown_overwrite(self.unknown_overwrite)
     pallas.check_kernel(self.kernel)
     pallas.check_kernel(self.frame_kernel)
     if not isinstance(self.pallas, PallasTuning):

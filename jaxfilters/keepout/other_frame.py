@@ -227,7 +227,8 @@ def _edges_batch(cost, mask, axes, idx, state, window, run, *, config: KeepoutCo
     floats = jnp.stack([t[:, 0], t[:, 1], mask.origin[idx, 0], mask.origin[idx, 1], inv[idx]], axis=1)
     new = pallas.other_frame_write(cost, (xc, xs, yc, ys), (tx, ty), source, ints, floats.astype(jnp.float32),
                                    mshape=(hm, wm), escape=config.override_lethal_cost,
-                                   lethal_cost=config.lethal_override_cost, tuning=config.pallas)
+                                   lethal_cost=config.lethal_override_cost, tuning=config.pallas,
+                                   unknown_overwrite=config.unknown_overwrite)
   else:
     one = lambda c, ax, i, win, rn, st: _edges_one(c, ax, tables, source, i, (hm, wm), win, rn, st,
                                                    config=config, packed=packed)

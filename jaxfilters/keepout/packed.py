@@ -11,6 +11,7 @@ from __future__ import annotations
 import jax
 import jax.numpy as jnp
 
+from jaxfilters import constants
 from jaxfilters.keepout.config import KeepoutConfig
 
 _HI = 0x80808080
@@ -30,6 +31,12 @@ def bytes_plus_one(x):
 def bytes_minus_one(x):
   """Each byte of uint32 words minus one, wrapping 0 to 255."""
   return ((x | _u32(_HI)) - _u32(_ONES)) ^ (~x & _u32(_HI))
+
+
+def zero_bytes(x):
+  """0x80 in each byte of uint32 words that is zero, else 0x00 (Hacker's Delight 6-2, exact)."""
+  y = (x & _u32(_LO)) + _u32(_LO)
+  return ~(y | x | _u32(_LO))
 
 
 def bytes_less_than(a, b):
@@ -74,7 +81,10 @@ def write_rule(c, m1, state, config: KeepoutConfig):
 
   c: uint32 costs; m1: uint32 (mask cost + 1) bytes, 0 where unknown or not visited.
   """
-  write = bytes_less_than(bytes_plus_one(c), m1)
+  c1 = bytes_plus_one(c)
+  if config.unknown_overwrite == "inscribed":   # common.old_plus_one_u8: unknown (c1 = 0) compares as 253 (as old 252)
+    c1 = c1 | ((zero_bytes(c1) >> _u32(7)) * _u32(constants.INSCRIBED_INFLATED_OBSTACLE))
+  write = bytes_less_than(c1, m1)
   if config.override_lethal_cost:
     value = jnp.where(state.is_pose_lethal, _u32(config.lethal_override_cost * _ONES), bytes_minus_one(m1))
   else:

@@ -3,8 +3,9 @@
 The aligned path of `keepout_filter` reads each robot's mask cells as one
 [H, W] window of the masks' (cost + 1) table (`mask_cost_plus_one_table`,
 padded by H rows and W columns of 0 = unknown) at a start (sx, sy), and applies
-Nav2's rule `mask != 255 and (mask > old or old == 255)`, which on (x + 1) bytes
-is `m1 > c1` (see `same_frame.aligned_one`). XLA runs it as one fused loop; this
+Nav2's rule `mask != 255 and (mask > old or (old == 255 and mask >= 253))` (or,
+with `KeepoutConfig.unknown_overwrite="any"`, `... or old == 255`), which on (x + 1)
+bytes is `m1 > c1` (see `same_frame.aligned_one`, `common.old_plus_one_u8`). XLA runs it as one fused loop; this
 module runs it as one Triton kernel over the fleet: each costmap byte is read and
 written once (or, with `PallasTuning(in_place=True)`, updated in place where the
 caller donates the costmap), and the mask window is read from the table, a few
@@ -201,9 +202,29 @@ def slice_params_from_bounds(idx, sx, sy, x0, x1, y0, y1, take, lethal, *, shape
   return jnp.stack([i32(c) for c in cols], axis=1)
 
 
-def _rule(c, m1, lethal, *, escape: bool, lethal_cost: int):
-  """Nav2's write rule on uint8 cells c and mask (cost + 1) bytes m1 (0 = do not write)."""
+UNKNOWN_OVERWRITES = ("inscribed", "any")   # KeepoutConfig.unknown_overwrite (config imports this module)
+
+
+def check_unknown_overwrite(unknown_overwrite) -> str:
+  """`unknown_overwrite` if it is one of UNKNOWN_OVERWRITES, else ValueError naming them."""
+  if not isinstance(unknown_overwrite, str) or unknown_overwrite not in UNKNOWN_OVERWRITES:
+    raise ValueError(f"unknown_overwrite must be one of {UNKNOWN_OVERWRITES}; got {unknown_overwrite!r}")
+  return unknown_overwrite
+
+
+def _rule(c, m1, lethal, *, escape: bool, lethal_cost: int, unknown_overwrite: str):
+  """Nav2's write rule on uint8 cells c and mask (cost + 1) bytes m1 (0 = do not write).
+
+  `common.m1_rule_u8`: with unknown_overwrite "inscribed" an unknown c (c1 = 0) compares
+  as c1 = 253, so only a mask cost >= 253 overwrites it.
+  """
   c1 = c + jnp.uint8(1)
+  if unknown_overwrite == "inscribed":
+    c1 = jnp.where(c1 == jnp.uint8(0), jnp.uint8(253), c1)
+    value = m1 - jnp.uint8(1)
+    if escape:
+      value = jnp.where(lethal != 0, jnp.uint8(lethal_cost), value)
+    return jnp.where(m1 > c1, value, c)
   if escape:
     value = jnp.where(lethal != 0, jnp.uint8(lethal_cost), m1 - jnp.uint8(1))
     return jnp.where(m1 > c1, value, c)
@@ -227,7 +248,7 @@ def _in_range(v, lo, hi):
 
 
 def _flat_kernel(p_ref, cost_ref, tab_ref, out_ref, *, h, w, plane, pitch, rows, span, nblk, escape, lethal_cost,
-                 in_place):
+                 in_place, unknown_overwrite):
   pl, plgpu = _pallas()
   pid = pl.program_id(0)
   r, row0 = jax.lax.div(pid, nblk), jax.lax.rem(pid, nblk) * rows
@@ -246,11 +267,12 @@ def _flat_kernel(p_ref, cost_ref, tab_ref, out_ref, *, h, w, plane, pitch, rows,
   # The table as one flat run: cell (sy + row0 + q, sx + col) of mask i.
   base = i * plane + (sy + row0) * pitch + sx
   m1 = plgpu.load(tab_ref.at[base + e + q * (pitch - w)], mask=visit, other=jnp.uint8(0))
-  plgpu.store(out_ref.at[r, pl.ds(start, span)], _rule(c, m1, lethal, escape=escape, lethal_cost=lethal_cost),
+  plgpu.store(out_ref.at[r, pl.ds(start, span)], _rule(c, m1, lethal, escape=escape, lethal_cost=lethal_cost, unknown_overwrite=unknown_overwrite),
               mask=live)
 
 
-def _rows_kernel(p_ref, cost_ref, tab_ref, out_ref, *, h, rows, span, nblk, w, escape, lethal_cost, in_place):
+def _rows_kernel(p_ref, cost_ref, tab_ref, out_ref, *, h, rows, span, nblk, w, escape, lethal_cost, in_place,
+                 unknown_overwrite):
   pl, plgpu = _pallas()
   pid = pl.program_id(0)
   r, row0 = jax.lax.div(pid, nblk), jax.lax.rem(pid, nblk) * rows
@@ -264,7 +286,7 @@ def _rows_kernel(p_ref, cost_ref, tab_ref, out_ref, *, h, rows, span, nblk, w, e
   visit = in_window & _in_range(k, x0, x1)[None, :]
   m1 = plgpu.load(tab_ref.at[i, pl.ds(sy + row0, rows), pl.ds(sx, span)], mask=visit, other=jnp.uint8(0))
   plgpu.store(out_ref.at[r, pl.ds(row0, rows), pl.ds(0, span)],
-              _rule(c, m1, lethal, escape=escape, lethal_cost=lethal_cost), mask=live)
+              _rule(c, m1, lethal, escape=escape, lethal_cost=lethal_cost, unknown_overwrite=unknown_overwrite), mask=live)
 
 
 def _next_pow2(n: int) -> int:
@@ -294,7 +316,8 @@ def _in_chunks(fn, batched: tuple, chunk: int) -> jax.Array:
   return jnp.concatenate(parts, axis=0)
 
 
-def aligned_write(cost, table, params, *, escape: bool, lethal_cost: int, tuning: PallasTuning) -> jax.Array:
+def aligned_write(cost, table, params, *, escape: bool, lethal_cost: int, tuning: PallasTuning,
+                  unknown_overwrite: str = "inscribed") -> jax.Array:
   """The aligned keepout write for a fleet in one Pallas kernel: new cost uint8 [B, H, W].
 
   Same integers as `jax.vmap(same_frame.aligned_one)` on the robots with a
@@ -313,13 +336,17 @@ def aligned_write(cost, table, params, *, escape: bool, lethal_cost: int, tuning
       robot's `lethal` flag is set).
     lethal_cost: static int in [0, 255].
     tuning: static PallasTuning.
+    unknown_overwrite: static, `KeepoutConfig.unknown_overwrite` ("inscribed":
+      an unknown old cell is overwritten only by a mask cost >= 253; "any": by any).
 
   Returns:
     uint8 [B, H, W].
 
   Raises:
-    ValueError: wrong dtypes or shapes (static), a table of 2 GiB or more.
+    ValueError: wrong dtypes or shapes (static), a table of 2 GiB or more, an
+      unknown_overwrite that is not one of UNKNOWN_OVERWRITES.
   """
+  check_unknown_overwrite(unknown_overwrite)
   if cost.dtype != jnp.uint8 or cost.ndim != 3:
     raise ValueError(f"cost must be uint8 [B, H, W]; got {cost.dtype}{tuple(cost.shape)}")
   b, h, w = cost.shape
@@ -335,12 +362,13 @@ def aligned_write(cost, table, params, *, escape: bool, lethal_cost: int, tuning
   if b == 0:
     return cost
   if b > _robots_per_call(h, w):
-    return _in_chunks(lambda c, p: aligned_write(c, table, p, escape=escape, lethal_cost=lethal_cost, tuning=tuning),
+    return _in_chunks(lambda c, p: aligned_write(c, table, p, escape=escape, lethal_cost=lethal_cost, tuning=tuning,
+                                                 unknown_overwrite=unknown_overwrite),
                       (cost, params), _robots_per_call(h, w))
   pl, plgpu = _pallas()
   rows, span, nblk = block_shape(h, w, tuning)
   statics = dict(h=h, w=w, rows=rows, span=span, nblk=nblk, escape=bool(escape), lethal_cost=int(lethal_cost),
-                 in_place=tuning.in_place)
+                 in_place=tuning.in_place, unknown_overwrite=unknown_overwrite)
   if tuning.layout == "flat":
     statics.update(plane=table.shape[1] * table.shape[2], pitch=table.shape[2])
     kernel = lambda *refs: _flat_kernel(*refs, **statics)
@@ -368,7 +396,7 @@ FRAME_FLOAT_PARAMS = 5    # per-robot float32: tx, ty, mask origin x, y (leading
 
 
 def _frame_kernel(p_ref, f_ref, xc_ref, xs_ref, yc_ref, ys_ref, cost_ref, tx_ref, ty_ref, src_ref, out_ref, *,
-                  h, w, hm, wm, rows, shift, nblk, escape, lethal_cost):
+                  h, w, hm, wm, rows, shift, nblk, escape, lethal_cost, unknown_overwrite):
   """One program: `rows` rows of one robot as a flat run of rows * 2**shift lanes (the columns padded)."""
   pl, plgpu = _pallas()
   pid = pl.program_id(0)
@@ -399,12 +427,12 @@ def _frame_kernel(p_ref, f_ref, xc_ref, xs_ref, yc_ref, ys_ref, cost_ref, tx_ref
   visit = (live & (nx >= 0) & (nx < wm) & (ny >= 0) & (ny < hm) & (col >= x0) & (col < x1)
            & (row >= y0) & (row < y1))
   m1 = plgpu.load(src_ref.at[i * (hm * wm) + ny * wm + nx], mask=visit, other=jnp.uint8(0))
-  plgpu.store(out_ref.at[r, row * w + col], _rule(c, m1, lethal, escape=escape, lethal_cost=lethal_cost),
+  plgpu.store(out_ref.at[r, row * w + col], _rule(c, m1, lethal, escape=escape, lethal_cost=lethal_cost, unknown_overwrite=unknown_overwrite),
               mask=live)
 
 
 def other_frame_write(cost, axes, tables, source, ints, floats, *, mshape, escape: bool, lethal_cost: int,
-                      tuning: PallasTuning) -> jax.Array:
+                      tuning: PallasTuning, unknown_overwrite: str = "inscribed") -> jax.Array:
   """The other-frame (SE2) keepout write of a fleet in one Pallas kernel: new cost uint8 [B, H, W].
 
   Each cell's centre is rotated with the robot's `reference.se2_axes_one` vectors
@@ -423,13 +451,14 @@ def other_frame_write(cost, axes, tables, source, ints, floats, *, mshape, escap
       that does not run; lethal) per robot.
     floats: float32 [B, 5] (tx, ty, the mask origin's leading parts, 1 / resolution as
       `geometry.edge_reciprocal`) per robot.
-    mshape: static (Hm, Wm). escape, lethal_cost: as `aligned_write`. tuning: static PallasTuning
+    mshape: static (Hm, Wm). escape, lethal_cost, unknown_overwrite: as `aligned_write`. tuning: static PallasTuning
       (its frame_block_cells, frame_num_warps, num_stages and interpret; a program takes
       whole rows of one robot as a flat run, the columns padded to a power of two).
 
   Returns:
     uint8 [B, H, W]. A batch of 2 GiB or more runs in chunks of robots, as `aligned_write`'s.
   """
+  check_unknown_overwrite(unknown_overwrite)
   b, h, w = cost.shape
   hm, wm = mshape
   for name, a, dt in (("source", source, jnp.uint8), ("ints", ints, jnp.int32), ("floats", floats, jnp.float32)):
@@ -446,13 +475,13 @@ def other_frame_write(cost, axes, tables, source, ints, floats, *, mshape, escap
   if b > _robots_per_call(h, w):
     return _in_chunks(lambda c, xc, xs, yc, ys, i, f: other_frame_write(
         c, (xc, xs, yc, ys), tables, source, i, f, mshape=mshape, escape=escape, lethal_cost=lethal_cost,
-        tuning=tuning), (cost, *axes, ints, floats), _robots_per_call(h, w))
+        tuning=tuning, unknown_overwrite=unknown_overwrite), (cost, *axes, ints, floats), _robots_per_call(h, w))
   pl, plgpu = _pallas()
   span = _next_pow2(w)
   rows = min(_next_pow2(h), max(1, tuning.frame_block_cells // span))
   nblk = -(-h // rows)
   statics = dict(h=h, w=w, hm=hm, wm=wm, rows=rows, shift=span.bit_length() - 1, nblk=nblk,
-                 escape=bool(escape), lethal_cost=int(lethal_cost))
+                 escape=bool(escape), lethal_cost=int(lethal_cost), unknown_overwrite=unknown_overwrite)
   xc, xs, yc, ys = axes
   call = pl.pallas_call(
       lambda *refs: _frame_kernel(*refs, **statics),

@@ -1,7 +1,8 @@
 """`keepout_filter`: Nav2's KeepoutFilter::process over a fleet (docs/nav2_semantics.md §4.3-§4.4).
 
 For each visited master cell the mask is sampled at the cell centre and the cost
-raised (`data > old or old == 255`), skipping unknown mask cells; in escape mode the
+raised (`data > old or (old == 255 and data >= 253)`, or with
+`KeepoutConfig.unknown_overwrite="any"` `data > old or old == 255`), skipping unknown mask cells; in escape mode the
 written value is `lethal_override_cost`. `filter_batch` picks the path: the same-frame
 fast path (same_frame.py, other_resolution.py), the other-frame fast path
 (other_frame.py), or the exact per-cell path (reference.py) for masks too large for

@@ -142,8 +142,10 @@ def keepout_stack_one(cost, origin, res, stack, i, mask_origin, mask_res, state,
     visit = inside & in_window
     mask_val = flat[base + my * wm + mx]
   mask_cost = occ_to_cost(mask_val)
-  write = (visit & (mask_cost != constants.NO_INFORMATION)
-           & ((mask_cost > cost) | (cost == constants.NO_INFORMATION)))
+  unknown_old = cost == constants.NO_INFORMATION
+  if config.unknown_overwrite == "inscribed":   # Nav2 main (PR #6329)
+    unknown_old = unknown_old & (mask_cost >= constants.INSCRIBED_INFLATED_OBSTACLE)
+  write = visit & (mask_cost != constants.NO_INFORMATION) & ((mask_cost > cost) | unknown_old)
   if config.override_lethal_cost:
     value = jnp.where(state.is_pose_lethal, jnp.uint8(config.lethal_override_cost), mask_cost)
   else:

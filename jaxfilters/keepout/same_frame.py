@@ -160,7 +160,8 @@ def _pallas_batch(cost, data, sliced, idx, sx, sy, box, state, gather_all, *, co
                                              shape=(h, w))
     out = pallas.aligned_write(cost, cost_plus_one_table(data, h, w), params,
                                escape=config.override_lethal_cost,
-                               lethal_cost=config.lethal_override_cost, tuning=config.pallas)
+                               lethal_cost=config.lethal_override_cost, tuning=config.pallas,
+                               unknown_overwrite=config.unknown_overwrite)
 
     def rest(out):
       return tree_where(sliced, out, gather_all(out))

@@ -14,14 +14,15 @@ way Nav2 does (filter -> info server -> mask server) and builds the bundles;
 
 from jaxfilters.nav2.document import MAX_NAME_CHARS, MAX_PARAMS_BYTES, MAX_PARAMS_DEPTH, Nav2ParamsError
 from jaxfilters.nav2.params import Nav2Params, load_params
-from jaxfilters.nav2.runtime import (BINARY_PLUGIN, COSTMAPS, KEEPOUT_PLUGIN, SPEED_PLUGIN, ZONE_PLUGIN,
-                                     Nav2BinaryFilter, Nav2Costmap, Nav2Filter, Nav2KeepoutFilter,
+from jaxfilters.nav2.runtime import (ASYMMETRIC_INFLATION_PLUGIN, BINARY_PLUGIN, COSTMAPS, INFLATION_PLUGIN,
+                                     KEEPOUT_PLUGIN, SPEED_PLUGIN, ZONE_PLUGIN, Nav2BinaryFilter, Nav2Costmap,
+                                     Nav2Filter, Nav2InflationLayer, Nav2KeepoutFilter,
                                      Nav2ParamsWarning, Nav2Readout, Nav2SpeedFilter, Nav2ZoneFilter,
                                      ZoneSetpoint, ZoneStateConfig)
 
 __all__ = [
-    "BINARY_PLUGIN", "COSTMAPS", "KEEPOUT_PLUGIN", "MAX_NAME_CHARS", "MAX_PARAMS_BYTES", "MAX_PARAMS_DEPTH",
-    "SPEED_PLUGIN", "ZONE_PLUGIN", "Nav2BinaryFilter", "Nav2Costmap", "Nav2Filter", "Nav2KeepoutFilter",
-    "Nav2Params", "Nav2ParamsError", "Nav2ParamsWarning", "Nav2Readout", "Nav2SpeedFilter", "Nav2ZoneFilter",
+    "ASYMMETRIC_INFLATION_PLUGIN", "BINARY_PLUGIN", "COSTMAPS", "INFLATION_PLUGIN", "KEEPOUT_PLUGIN", "MAX_NAME_CHARS", "MAX_PARAMS_BYTES", "MAX_PARAMS_DEPTH",
+    "SPEED_PLUGIN", "ZONE_PLUGIN", "Nav2BinaryFilter", "Nav2Costmap", "Nav2Filter", "Nav2InflationLayer",
+    "Nav2KeepoutFilter", "Nav2Params", "Nav2ParamsError", "Nav2ParamsWarning", "Nav2Readout", "Nav2SpeedFilter", "Nav2ZoneFilter",
     "ZoneSetpoint", "ZoneStateConfig", "load_params",
 ]

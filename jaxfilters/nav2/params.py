@@ -17,6 +17,8 @@ The file is read the way Nav2 wires its filters (docs/nav2_semantics.md §3,
 
 * costmap nodes `global_costmap` / `local_costmap` list filters under
   `filters:` (and, to run one as a layer before inflation, under `plugins:`);
+  the InflationLayer and AsymmetricInflationLayer entries of `plugins:` become
+  `Nav2Costmap.layers` (`jaxfilters.nav2.layers`); other layers are not read;
   each filter names a `plugin` class and a `filter_info_topic`;
 * `costmap_filter_info_server` nodes (any node with a top-level
   `filter_info_topic` or `mask_topic`, or named `*filter_info_server*`)
@@ -81,6 +83,7 @@ from jaxfilters.keepout import KeepoutConfig
 from jaxfilters.map_io import load_map
 from jaxfilters.nav2.document import (MAX_MESSAGE, Nav2ParamsError, Node, Reader, cut, nodes_of,
                                       parent_namespace, read_document, resolve_topic, show)
+from jaxfilters.nav2.layers import inflation_layers
 from jaxfilters.nav2.runtime import (BINARY_PLUGIN, COSTMAPS, FRAME_DEFAULT, KEEPOUT_PLUGIN, SPEED_PLUGIN,
                                      ZONE_PLUGIN, Nav2BinaryFilter, Nav2Costmap, Nav2KeepoutFilter,
                                      Nav2ParamsWarning, Nav2SpeedFilter, Nav2ZoneFilter, ZoneSetpoint,
@@ -374,9 +377,13 @@ def _costmap(ld: _Loader, node: Node) -> Nav2Costmap:
   resolution = None
   if r.has("resolution"):
     resolution = r.get("resolution", "float")
-    validate.resolution_value(resolution, owner=r.where, name="parameter 'resolution'")
+    try:
+      validate.resolution_value(resolution, owner=r.where, name="parameter 'resolution'")
+    except ValueError as e:   # a plain ValueError before: every problem with the file is a Nav2ParamsError
+      raise Nav2ParamsError(str(e)) from None
   names = [(n, False) for n in r.get("filters", "str_list", [])]
-  for n in r.get("plugins", "str_list", []):
+  plugins = r.get("plugins", "str_list", [])
+  for n in plugins:
     if r.has(f"{n}.plugin") and r.get(f"{n}.plugin", "str") in (KEEPOUT_PLUGIN, SPEED_PLUGIN, BINARY_PLUGIN,
                                                                 ZONE_PLUGIN):
       names.append((n, True))
@@ -387,7 +394,7 @@ def _costmap(ld: _Loader, node: Node) -> Nav2Costmap:
     seen.add(n)
   filters = tuple(_filter(ld, node, n, as_layer) for n, as_layer in names)
   return Nav2Costmap(name=node.name, node=node.full_name, global_frame=frame, resolution=resolution,
-                     filters=filters)
+                     filters=filters, layers=inflation_layers(r, node, plugins))
 
 
 def load_params(path: str | os.PathLike, *, masks: Mapping[str, str | os.PathLike] | None = None,

@@ -26,6 +26,8 @@ import numpy as np
 
 from jaxfilters import constants
 from jaxfilters import geometry
+from jaxfilters.asymmetric_inflation import AsymmetricInflationConfig
+from jaxfilters.inflation import InflationConfig
 from jaxfilters import validate
 from jaxfilters.binary import BinaryResult, BinaryState, binary_filter
 from jaxfilters.keepout import KeepoutConfig
@@ -34,8 +36,9 @@ from jaxfilters.speed import LookaheadConfig, SpeedResult, SpeedState, speed_fil
 from jaxfilters.types import FilterMask, pytree_dataclass, check_poses
 from jaxfilters.zone import NUM_ZONES, ZoneResult, ZoneState, ZoneTable, zone_filter
 
-__all__ = ["BINARY_PLUGIN", "COSTMAPS", "FRAME_DEFAULT", "KEEPOUT_PLUGIN", "SPEED_PLUGIN", "ZONE_PLUGIN",
-           "Nav2BinaryFilter", "Nav2Costmap", "Nav2Filter", "Nav2KeepoutFilter", "Nav2ParamsWarning",
+__all__ = ["ASYMMETRIC_INFLATION_PLUGIN", "BINARY_PLUGIN", "COSTMAPS", "FRAME_DEFAULT", "INFLATION_PLUGIN",
+           "KEEPOUT_PLUGIN", "SPEED_PLUGIN", "ZONE_PLUGIN", "Nav2BinaryFilter", "Nav2Costmap", "Nav2Filter",
+           "Nav2InflationLayer", "Nav2KeepoutFilter", "Nav2ParamsWarning",
            "Nav2Readout", "Nav2SpeedFilter", "Nav2ZoneFilter", "ZoneSetpoint", "ZoneStateConfig",
            "info_warning", "speed_percentage"]
 
@@ -43,6 +46,8 @@ KEEPOUT_PLUGIN = "nav2_costmap_2d::KeepoutFilter"
 SPEED_PLUGIN = "nav2_costmap_2d::SpeedFilter"
 BINARY_PLUGIN = "nav2_costmap_2d::BinaryFilter"
 ZONE_PLUGIN = "nav2_costmap_2d::ZoneParameterFilter"
+INFLATION_PLUGIN = "nav2_costmap_2d::InflationLayer"
+ASYMMETRIC_INFLATION_PLUGIN = "nav2_costmap_2d::AsymmetricInflationLayer"
 COSTMAPS = ("global_costmap", "local_costmap")
 # The frame Nav2's costmaps and map servers use when `global_frame` / `frame_id` is not set.
 FRAME_DEFAULT = "map"
@@ -256,6 +261,30 @@ _KIND_FIELDS = {Nav2KeepoutFilter: "keepout", Nav2SpeedFilter: "speed", Nav2Bina
                 Nav2ZoneFilter: "zone"}
 
 
+@dataclasses.dataclass(frozen=True)
+class Nav2InflationLayer:
+  """An inflation layer a costmap lists under `plugins:` (docs/nav2_semantics.md §9).
+
+  Attributes:
+    name: the layer's name in the costmap's `plugins:` list.
+    plugin: INFLATION_PLUGIN or ASYMMETRIC_INFLATION_PLUGIN.
+    config: the InflationConfig (for `inflate`) or AsymmetricInflationConfig (for
+      `asymmetric_inflate`) holding the layer's parameters (Nav2's defaults where the
+      file sets none), the costmap's `resolution` parameter (Nav2's default 0.1 when
+      absent) and the inscribed radius of the costmap's padded footprint, or the
+      InflationLayer's `custom_inscribed_radius` when >= 0. A global costmap that a
+      static map sizes takes the map's resolution in Nav2: build it with
+      `dataclasses.replace(layer.config, resolution=...)` (`inflate` and
+      `asymmetric_inflate` raise on a Costmap whose resolution differs from the config's).
+    plan_topic: the AsymmetricInflationLayer's path topic, resolved like Nav2's
+      `joinWithParentNamespace`; None for an InflationLayer.
+  """
+  name: str
+  plugin: str
+  config: InflationConfig | AsymmetricInflationConfig
+  plan_topic: str | None = None
+
+
 @dataclasses.dataclass(frozen=True, eq=False)
 class Nav2Costmap:
   """The filters of one Nav2 costmap (`global_costmap` or `local_costmap`).
@@ -269,12 +298,32 @@ class Nav2Costmap:
       sets it, else None.
     filters: every filter in Nav2's order (`filters:` then filter plugins
       listed under `plugins:`).
+    layers: the inflation layers listed under `plugins:`, in their order
+      (`Nav2InflationLayer`); other layers (static, obstacle, voxel) are not read.
   """
   name: str
   node: str
   global_frame: str
   resolution: float | None
   filters: tuple[Nav2Filter, ...]
+  layers: tuple[Nav2InflationLayer, ...] = ()
+
+  def _layer(self, plugin: str) -> Nav2InflationLayer | None:
+    found = [layer for layer in self.layers if layer.plugin == plugin]
+    if len(found) > 1:
+      raise ValueError(f"{self.name} has {len(found)} {plugin} layers ({', '.join(x.name for x in found)}); "
+                       "pick one from .layers")
+    return found[0] if found else None
+
+  @property
+  def inflation(self) -> Nav2InflationLayer | None:
+    """The InflationLayer, or None (ValueError if there are several)."""
+    return self._layer(INFLATION_PLUGIN)
+
+  @property
+  def asymmetric_inflation(self) -> Nav2InflationLayer | None:
+    """The AsymmetricInflationLayer, or None (ValueError if there are several)."""
+    return self._layer(ASYMMETRIC_INFLATION_PLUGIN)
 
   def _one(self, cls):
     found = [f for f in self.filters if type(f) is cls]

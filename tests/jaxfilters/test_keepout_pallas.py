@@ -70,7 +70,7 @@ def _numpy_kernel(cost, data, idx, sx, sy, x, y, take, lethal, *, escape, lethal
     mc = np.where(on, LUT[data[idx[r], np.clip(my, 0, hm - 1), np.clip(mx, 0, wm - 1)].astype(np.int64) + 128], 255)
     visit = (kk >= x[0, r]) & (kk < x[1, r]) & (jj >= y[0, r]) & (jj < y[1, r])
     old = out[r]
-    write = visit & (mc != 255) & ((mc > old) | (old == 255))
+    write = visit & (mc != 255) & ((mc > old) | ((old == 255) & (mc >= 253)))   # Nav2 main (PR #6329)
     out[r] = np.where(write, lethal_cost if (escape and lethal[r]) else mc, old)
   return out.astype(np.uint8)
 

@@ -323,7 +323,7 @@ def test_other_frame_semantics_against_numpy_and_float64_reference():
       for k in range(win[0], win[2]):
         if 0 <= mx[j, k] < WM and 0 <= my[j, k] < HM:
           d = reference.mask_cost(data[my[j, k], mx[j, k]])
-          if d != 255 and (d > want[j, k] or want[j, k] == 255):
+          if d != 255 and (d > want[j, k] or (want[j, k] == 255 and d >= 253)):   # Nav2 main (PR #6329)
             want[j, k] = d
     np.testing.assert_array_equal(got[b], want)
     # And Nav2's float64 reference wherever the float64 centre is not within 1e-4 m of an edge.
