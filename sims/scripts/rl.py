@@ -47,8 +47,9 @@ examples:
   jaxfilters rl train --timesteps 50000000 --num-envs 8192 --devices all --randomize --out out/big
 
 --timesteps is rounded up to whole PPO iterations (--num-envs x --num-steps env steps each), split
-into --evals training calls with an evaluation of --num-eval episodes before the first and after
-each. --out must be empty, missing or a folder of an earlier run (only the files this command
+into --evals training calls as equal as whole iterations allow (--evals at most the iterations), with
+an evaluation of --num-eval episodes before the first and after each: --evals + 1 curve points. The
+env steps reported (progress lines, results.json) are counted on the device. --out must be empty, missing or a folder of an earlier run (only the files this command
 writes: policy.json, policy.msgpack, results.json, learning_curve.png) unless --overwrite.
 
 exit codes: 0 ok, 1 internal error (a bug; JAXFILTERS_DEBUG=1 shows the traceback), 2 bad option
@@ -265,6 +266,12 @@ def run_train(args) -> int:
   devices = parse_devices(args.devices, args.num_envs)
   if isinstance(devices, int):
     _check_device_minibatches(args, devices)
+  from sims.ppo import plan_training
+  try:
+    calls = plan_training(args.timesteps, args.num_envs, args.num_steps, args.evals)
+  except ValueError as e:
+    raise CliError(f"--timesteps {args.timesteps} --evals {args.evals} --num-envs {args.num_envs} "
+                   f"--num-steps {args.num_steps}: {e}") from None
   out = Path(args.out)
   check_out_dir(out, args.overwrite)
 
@@ -290,23 +297,22 @@ def run_train(args) -> int:
                          config=NavEnvConfig(keepout=args.keepout, costmap_stop=args.costmap_stop))
   adapter = GymnaxAdapter(env, args.episode_length, fn, full_reset=args.randomize)
   per_iter = args.num_envs * args.num_steps
-  iters = max(1, -(-args.timesteps // per_iter))
-  per_call = max(1, iters // args.evals)
-  num_calls = -(-iters // per_call)
-  algo = make_ppo(adapter, timesteps_per_call=per_call * per_iter, num_envs=args.num_envs,
+  algo = make_ppo(adapter, timesteps_per_call=per_iter, num_envs=args.num_envs,
                   num_steps=args.num_steps, num_minibatches=args.minibatches, hidden=hidden)
-  steps = num_calls * per_call * per_iter
+  planned = sum(calls) * per_iter
+  sizes = f"{calls[0]}" if len(set(calls)) == 1 else f"{calls[0]} or {calls[-1]}"
   dev = jax.devices()[0]
-  print(f"jaxfilters rl train: PPO (rejax) on NavEnv, {steps:,d} env steps ({num_calls} calls of {per_call} "
+  print(f"jaxfilters rl train: PPO (rejax) on NavEnv, {planned:,d} env steps ({len(calls)} calls of {sizes} "
         f"iterations of {args.num_envs} envs x {args.num_steps} steps), "
         f"{'randomised' if args.randomize else 'fixed'} zones and goals, {n_dev} x {dev.device_kind}; compiling",
         file=sys.stderr, flush=True)
 
   def progress(point):
-    print(_progress_line(point, steps), file=sys.stderr, flush=True)
+    print(_progress_line(point, planned), file=sys.stderr, flush=True)
 
-  ts, evals, timing = train_with_curve(adapter, algo, jax.random.PRNGKey(args.seed), num_calls=num_calls,
+  ts, evals, timing = train_with_curve(adapter, algo, jax.random.PRNGKey(args.seed), calls=calls,
                                        num_eval=args.num_eval, callback=progress, mesh=mesh)
+  steps = int(evals["env_steps"][-1])          # counted on the device (the train state's global_step)
   final = {k: v[-1] for k, v in evals.items()}
   per_env = getattr(ts.last_obs.sharding, "spec", None)     # the env batch's sharding after training
   placement = {"env_batch": None if per_env is None else [None if a is None else str(a) for a in per_env],
@@ -319,7 +325,7 @@ def run_train(args) -> int:
                          "(data-parallel updates must keep them identical); nothing was saved")
   config = {k: (str(v) if isinstance(v, Path) else v) for k, v in vars(args).items() if k != "func"}
   config.update(hidden=list(hidden), env_config=_finite(dataclasses.asdict(env.nav_config)),
-                robots_per_world=env.num_robots, env_steps=steps, calls=num_calls, iterations_per_call=per_call)
+                robots_per_world=env.num_robots, env_steps=steps, calls=len(calls), iterations_per_call=calls)
   save_policy(out, algo, ts, env_config=env.nav_config, fleet_config=env.fleet_config,
               episode_length=args.episode_length,
               extra=_finite({"seed": args.seed, "randomize": args.randomize, "env_steps": steps,
