@@ -59,7 +59,7 @@ _F32 = jnp.float32
 
 EVAL_KEYS = ("return", "success", "goals_reached", "keepout_entries", "collisions",
              "speed_violation_s", "speed_violation_after_clip_s", "speed_violation_outside_entry_s", "clipped",
-             "costmap_stops", "length")
+             "costmap_stops", "bad_action", "length")
 
 
 def evaluate_policy(adapter: GymnaxAdapter, act: Callable, key: jax.Array, num_eval: int) -> dict:
@@ -67,7 +67,8 @@ def evaluate_policy(adapter: GymnaxAdapter, act: Callable, key: jax.Array, num_e
 
   Returns:
     dict of float32 [num_eval] per episode: see EVAL_KEYS (success = at least
-    one goal reached before the episode ended).
+    one goal reached before the episode ended; bad_action = steps whose action had a NaN or
+    a value outside [-1, 1], which the env replaced by 0 or clipped).
   """
   def one(k):
     k_model, k_reset = jax.random.split(k)
@@ -82,7 +83,7 @@ def evaluate_policy(adapter: GymnaxAdapter, act: Callable, key: jax.Array, num_e
              "collisions": m["collisions"], "speed_violation_s": m["speed_violation_s"],
              "speed_violation_after_clip_s": m["speed_violation_after_clip_s"],
              "speed_violation_outside_entry_s": m["speed_violation_outside_entry_s"],
-             "costmap_stops": m["costmap_stops"],
+             "costmap_stops": m["costmap_stops"], "bad_action": (m["bad_action"] > 0).astype(_F32),
              "clipped": m["clipped"], "length": jnp.ones((), _F32)}
       acc = {n: acc[n] + jnp.where(alive, add[n], 0.0) for n in acc}
       return (nst, alive & (nst.done == 0), acc), None
@@ -93,6 +94,22 @@ def evaluate_policy(adapter: GymnaxAdapter, act: Callable, key: jax.Array, num_e
     return acc
 
   return jax.vmap(one)(jax.random.split(key, num_eval))
+
+
+def first_actions_finite(adapter: GymnaxAdapter, act: Callable, key: jax.Array, num: int) -> jax.Array:
+  """Whether `act(obs)` is finite on each of `num` first observations (the resets `evaluate_policy`
+  starts from with the same key): bool [num] (jittable).
+
+  A policy whose weights overflow float32 gives NaN or inf actions; the env replaces a NaN action by
+  0 and counts it as `bad_action`, so an evaluation would measure a robot at rest, not the policy.
+  """
+  def one(k):
+    k_model, k_reset = jax.random.split(k)
+    model = adapter.draw_model(k_model)
+    st = adapter.run_with_model(model, lambda: adapter.wrapped.reset(k_reset))
+    return jnp.all(jnp.isfinite(act(st.obs)))
+
+  return jax.vmap(one)(jax.random.split(key, num))
 
 
 def make_ppo(adapter: GymnaxAdapter, *, timesteps_per_call: int, num_envs: int = 32, num_steps: int = 64,

@@ -76,7 +76,9 @@ keepout_entries and collisions (totals over all episodes), speed_excess_s (mean 
 episode above the limit in force), speed_excess_after_clip_s (total seconds above the limit the
 speed filter published at the current 20 Hz tick: the robot slowing down after the clip),
 speed_excess_outside_entry_s (total seconds above the limit in force outside the 20 Hz ticks in
-which a slower zone is entered: 0 when the clip holds from the tick after each entry), mean_return, clipped_per_episode (m of command the speed filter clipped),
+which a slower zone is entered: 0 when the clip holds from the tick after each entry), bad_action_steps
+(steps whose action had a NaN, replaced by 0 in the env: 0 for a sound policy; a policy whose actions
+are not finite on the episodes' first observations is refused, exit 2), mean_return, clipped_per_episode (m of command the speed filter clipped),
 steps_per_episode, policy, seed, map, params, randomize, episode_length, device, wall_s.
 
 exit codes: 0 ok (rule breaks are reported, not an exit code), 1 internal error (a bug;
@@ -355,7 +357,7 @@ def run_train(args) -> int:
 # evaluate_policy's per-episode metrics other than the headline ones, by their output name (a metric
 # not named here is reported as NAME_per_episode).
 _HEADLINE = ("success", "goals_reached", "keepout_entries", "collisions", "speed_violation_s",
-             "speed_violation_after_clip_s", "speed_violation_outside_entry_s")
+             "speed_violation_after_clip_s", "speed_violation_outside_entry_s", "bad_action")
 _OTHER_METRICS = {"return": "mean_return", "clipped": "clipped_per_episode", "length": "steps_per_episode",
                   "costmap_stops": "costmap_stops_per_episode"}
 
@@ -380,7 +382,7 @@ def run_eval(args) -> int:
   import jax
   import numpy as np
 
-  from sims.ppo import GymnaxAdapter, evaluate_policy
+  from sims.ppo import GymnaxAdapter, evaluate_policy, first_actions_finite
   from sims.randomization import training_env
   try:
     env, fn = training_env(scenario, randomize=args.randomize, seed=args.seed, config=policy.env_config,
@@ -396,9 +398,18 @@ def run_eval(args) -> int:
                    f"and {env.action_size} (trained with another observation)")
   length = args.episode_length or policy.episode_length
   adapter = GymnaxAdapter(env, length, fn, full_reset=args.randomize)
+  key = jax.random.PRNGKey(args.seed)
+  # The first observations of the episodes about to run: a policy whose (unclipped) mean action is
+  # NaN or inf there has weights that overflow float32; the env would zero its NaN actions and the
+  # figures would describe a robot at rest.
+  finite = np.asarray(jax.jit(lambda k: first_actions_finite(adapter, policy.raw_action, k, args.episodes))(key))
+  if not finite.all():
+    raise CliError(f"--policy {args.policy}: the policy's actions are not finite (NaN or inf) on "
+                   f"{int((~finite).sum())} of the {args.episodes} episodes' first observations (its weights "
+                   "overflow float32); nothing evaluated")
   with jax.numpy_rank_promotion("allow"):
     per_episode = jax.jit(lambda k: evaluate_policy(adapter, policy.act, k, args.episodes))(
-        jax.random.PRNGKey(args.seed))
+        key)
   m = {k: np.asarray(v, np.float64) for k, v in jax.device_get(per_episode).items()}
   result = {
       "episodes": args.episodes,
@@ -413,6 +424,8 @@ def run_eval(args) -> int:
       # Above the limit in force outside the ticks where a slower zone is entered: 0 when the clip
       # holds from the tick after every entry.
       "speed_excess_outside_entry_s": float(m["speed_violation_outside_entry_s"].sum()),
+      # Steps whose action had a NaN (the env replaced it by 0): a sound policy has none.
+      "bad_action_steps": int(round(m["bad_action"].sum())),
       **{_OTHER_METRICS.get(key, f"{key}_per_episode"): float(v.mean()) for key, v in m.items()
          if key not in _HEADLINE},
       "policy": str(args.policy), "seed": args.seed, "map": scenario_args.map_label(args),
@@ -430,6 +443,7 @@ def run_eval(args) -> int:
           ("goals per episode", f"{result['goals_per_episode']:.3f}"),
           ("keepout entries", f"{result['keepout_entries']} in all"),
           ("collisions", f"{result['collisions']} in all"),
+          ("bad actions", f"{result['bad_action_steps']} steps in all (NaN actions the env replaced by 0)"),
           ("above speed limit", f"{result['speed_excess_s']:.4f} s per episode"),
           ("mean return", f"{result['mean_return']:.3f}"),
           ("clipped command", f"{result['clipped_per_episode']:.4f} m per episode"),
