@@ -173,7 +173,7 @@ def _check_seed(seed: int) -> None:
 
 
 def parse_hidden(text: str) -> tuple[int, ...]:
-  """--hidden H1,H2,... -> sizes (1 to 8 layers of 1 to 4096 units), or CliError."""
+  """--hidden H1,H2,... -> sizes (1 to sims.policy.MAX_LAYERS layers of 1 to MAX_HIDDEN units: what rl eval loads), or CliError."""
   from sims.policy import MAX_HIDDEN, MAX_LAYERS
   try:
     sizes = tuple(int(x) for x in str(text).split(","))
