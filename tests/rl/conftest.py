@@ -1,12 +1,12 @@
-"""The `jaxfilters rl` command of this checkout, whatever the installed entry point names.
+"""The `jaxfilters` commands of this checkout, whatever the installed entry points name.
 
-An editable install made from another checkout (or before a module moved) registers `rl` under a
-module path this tree may not have; the command tests here must run this tree's code, so the
-entry point is pointed at the module of this tree that defines `register_rl`.
+An editable install made from another checkout (or before a module moved) registers the commands
+(`rl`, `fleet`, `bench`) under module paths this tree may not have, or whose code differs from this
+tree's; the command tests here must run this tree's code, so each entry point of the group is
+pointed at the module of this tree that defines its register function.
 """
 
 import importlib.metadata
-import importlib.util
 from pathlib import Path
 
 import pytest
@@ -14,26 +14,26 @@ import pytest
 from jaxfilters import cli
 
 REPO = Path(__file__).resolve().parents[2]
-_CANDIDATES = ("sims.commands.rl", "sims.scripts.rl")
 
 
-def _local_module() -> str:
-  for name in _CANDIDATES:
-    if (REPO / (name.replace(".", "/") + ".py")).is_file():
-      return name
-  raise AssertionError(f"no rl command module in {REPO} ({_CANDIDATES})")
+def _local(ep):
+  """The entry point moved to this checkout's sims/commands or sims/scripts module of its name."""
+  attr = ep.value.partition(":")[2]
+  for package in ("sims.commands", "sims.scripts"):
+    module = f"{package}.{ep.name}"
+    if (REPO / (module.replace(".", "/") + ".py")).is_file():
+      return importlib.metadata.EntryPoint(name=ep.name, value=f"{module}:{attr}", group=ep.group)
+  return ep
 
 
 @pytest.fixture(autouse=True)
-def rl_command_of_this_checkout(monkeypatch):
-  module = _local_module()
-  ep = importlib.metadata.EntryPoint(name="rl", value=f"{module}:register_rl", group=cli.ENTRY_POINT_GROUP)
+def commands_of_this_checkout(monkeypatch):
   real = importlib.metadata.entry_points
 
   def entry_points(**kw):
     eps = real(**kw)
     if kw.get("group") != cli.ENTRY_POINT_GROUP:
       return eps
-    return importlib.metadata.EntryPoints([e for e in eps if e.name != "rl"] + [ep])
+    return importlib.metadata.EntryPoints([_local(ep) for ep in eps])
 
   monkeypatch.setattr(cli.importlib.metadata, "entry_points", entry_points)
