@@ -28,19 +28,21 @@ import sys
 import time
 
 import jax
+import numpy as np
 
 
 def _time_program(algo, mesh, calls: int) -> dict:
   from sims.rl.ppo import replicas_identical, train_program
   t0 = time.perf_counter()
   ts, train = train_program(algo, jax.random.PRNGKey(0), mesh)
-  compiled = train.lower(ts).compile()
+  iters = np.int32(algo.total_timesteps // (algo.num_envs * algo.num_steps))
+  compiled = train.lower(ts, iters).compile()
   compile_s = time.perf_counter() - t0
-  ts = jax.block_until_ready(compiled(ts))             # warm-up call
+  ts = jax.block_until_ready(compiled(ts, iters))      # warm-up call
   times = []
   for _ in range(calls):
     t = time.perf_counter()
-    ts = jax.block_until_ready(compiled(ts))
+    ts = jax.block_until_ready(compiled(ts, iters))
     times.append(time.perf_counter() - t)
   if mesh is not None and not replicas_identical(ts):
     raise RuntimeError("the devices' copies of the networks differ after training")

@@ -66,8 +66,9 @@ examples:
   jaxfilters rl train --timesteps 50000000 --num-envs 8192 --devices all --randomize --out out/big
 
 --timesteps is rounded up to whole PPO iterations (--num-envs x --num-steps env steps each), split
-into --evals training calls with an evaluation of --num-eval episodes before the first and after
-each. --out must be empty, missing or a folder of an earlier run (only the files this command
+into --evals training calls as equal as whole iterations allow (--evals at most the iterations), with
+an evaluation of --num-eval episodes before the first and after each: --evals + 1 curve points. The
+env steps reported (progress lines, results.json) are counted on the device. --out must be empty, missing or a folder of an earlier run (only the files this command
 writes: policy.json, policy.msgpack, results.json, learning_curve.png) unless --overwrite.
 
 exit codes: 0 ok, 1 internal error (a bug; JAXFILTERS_DEBUG=1 shows the traceback), 2 bad option
@@ -94,7 +95,9 @@ keepout_entries and collisions (totals over all episodes), speed_excess_s (mean 
 episode above the limit in force), speed_excess_after_clip_s (total seconds above the limit the
 speed filter published at the current 20 Hz tick: the robot slowing down after the clip),
 speed_excess_outside_entry_s (total seconds above the limit in force outside the 20 Hz ticks in
-which a slower zone is entered: 0 when the clip holds from the tick after each entry), mean_return, clipped_per_episode (m of command the speed filter clipped),
+which a slower zone is entered: 0 when the clip holds from the tick after each entry), bad_action_steps
+(steps whose action had a NaN, replaced by 0 in the env: 0 for a sound policy; a policy whose actions
+are not finite on the episodes' first observations is refused, exit 2), mean_return, clipped_per_episode (m of command the speed filter clipped),
 steps_per_episode, policy, seed, map, params, randomize, episode_length, device, wall_s.
 
 exit codes: 0 ok (rule breaks are reported, not an exit code), 1 internal error (a bug;
@@ -308,6 +311,12 @@ def run_train(args) -> int:
   devices = parse_devices(args.devices, args.num_envs)
   if isinstance(devices, int):
     _check_device_minibatches(args, devices)
+  from sims.rl.ppo import plan_training
+  try:
+    calls = plan_training(args.timesteps, args.num_envs, args.num_steps, args.evals)
+  except ValueError as e:
+    raise CliError(f"--timesteps {args.timesteps} --evals {args.evals} --num-envs {args.num_envs} "
+                   f"--num-steps {args.num_steps}: {e}") from None
   out = Path(args.out)
   check_out_dir(out, args.overwrite)
 
@@ -335,23 +344,22 @@ def run_train(args) -> int:
                          config=NavEnvConfig(keepout=args.keepout, costmap_stop=args.costmap_stop))
   adapter = GymnaxAdapter(env, args.episode_length, fn, full_reset=args.randomize)
   per_iter = args.num_envs * args.num_steps
-  iters = max(1, -(-args.timesteps // per_iter))
-  per_call = max(1, iters // args.evals)
-  num_calls = -(-iters // per_call)
-  algo = make_ppo(adapter, timesteps_per_call=per_call * per_iter, num_envs=args.num_envs,
+  algo = make_ppo(adapter, timesteps_per_call=per_iter, num_envs=args.num_envs,
                   num_steps=args.num_steps, num_minibatches=args.minibatches, hidden=hidden)
-  steps = num_calls * per_call * per_iter
+  planned = sum(calls) * per_iter
+  sizes = f"{calls[0]}" if len(set(calls)) == 1 else f"{calls[0]} or {calls[-1]}"
   dev = jax.devices()[0]
-  print(f"jaxfilters rl train: PPO (rejax) on NavEnv, {steps:,d} env steps ({num_calls} calls of {per_call} "
+  print(f"jaxfilters rl train: PPO (rejax) on NavEnv, {planned:,d} env steps ({len(calls)} calls of {sizes} "
         f"iterations of {args.num_envs} envs x {args.num_steps} steps), "
         f"{'randomised' if args.randomize else 'fixed'} zones and goals, {n_dev} x {dev.device_kind}; compiling",
         file=sys.stderr, flush=True)
 
   def progress(point):
-    print(_progress_line(point, steps), file=sys.stderr, flush=True)
+    print(_progress_line(point, planned), file=sys.stderr, flush=True)
 
-  ts, evals, timing = train_with_curve(adapter, algo, jax.random.PRNGKey(args.seed), num_calls=num_calls,
+  ts, evals, timing = train_with_curve(adapter, algo, jax.random.PRNGKey(args.seed), calls=calls,
                                        num_eval=args.num_eval, callback=progress, mesh=mesh)
+  steps = int(evals["env_steps"][-1])          # counted on the device (the train state's global_step)
   final = {k: v[-1] for k, v in evals.items()}
   per_env = getattr(ts.last_obs.sharding, "spec", None)     # the env batch's sharding after training
   placement = {"env_batch": None if per_env is None else [None if a is None else str(a) for a in per_env],
@@ -364,7 +372,7 @@ def run_train(args) -> int:
                          "(data-parallel updates must keep them identical); nothing was saved")
   config = {k: (str(v) if isinstance(v, Path) else v) for k, v in vars(args).items() if k != "func"}
   config.update(hidden=list(hidden), env_config=_finite(dataclasses.asdict(env.nav_config)),
-                robots_per_world=env.num_robots, env_steps=steps, calls=num_calls, iterations_per_call=per_call)
+                robots_per_world=env.num_robots, env_steps=steps, calls=len(calls), iterations_per_call=calls)
   save_policy(out, algo, ts, env_config=env.nav_config, fleet_config=env.fleet_config,
               episode_length=args.episode_length,
               extra=_finite({"seed": args.seed, "randomize": args.randomize, "env_steps": steps,
@@ -394,7 +402,7 @@ def run_train(args) -> int:
 # evaluate_policy's per-episode metrics other than the headline ones, by their output name (a metric
 # not named here is reported as NAME_per_episode).
 _HEADLINE = ("success", "goals_reached", "keepout_entries", "collisions", "speed_violation_s",
-             "speed_violation_after_clip_s", "speed_violation_outside_entry_s")
+             "speed_violation_after_clip_s", "speed_violation_outside_entry_s", "bad_action")
 _OTHER_METRICS = {"return": "mean_return", "clipped": "clipped_per_episode", "length": "steps_per_episode",
                   "costmap_stops": "costmap_stops_per_episode"}
 
@@ -419,7 +427,7 @@ def run_eval(args) -> int:
   import jax
   import numpy as np
 
-  from sims.rl.ppo import GymnaxAdapter, evaluate_policy
+  from sims.rl.ppo import GymnaxAdapter, evaluate_policy, first_actions_finite
   from sims.rl.randomization import training_env
   try:
     env, fn = training_env(scenario, randomize=args.randomize, seed=args.seed, config=policy.env_config,
@@ -435,9 +443,18 @@ def run_eval(args) -> int:
                    f"and {env.action_size} (trained with another observation)")
   length = args.episode_length or policy.episode_length
   adapter = GymnaxAdapter(env, length, fn, full_reset=args.randomize)
+  key = jax.random.PRNGKey(args.seed)
+  # The first observations of the episodes about to run: a policy whose (unclipped) mean action is
+  # NaN or inf there has weights that overflow float32; the env would zero its NaN actions and the
+  # figures would describe a robot at rest.
+  finite = np.asarray(jax.jit(lambda k: first_actions_finite(adapter, policy.raw_action, k, args.episodes))(key))
+  if not finite.all():
+    raise CliError(f"--policy {args.policy}: the policy's actions are not finite (NaN or inf) on "
+                   f"{int((~finite).sum())} of the {args.episodes} episodes' first observations (its weights "
+                   "overflow float32); nothing evaluated")
   with jax.numpy_rank_promotion("allow"):
     per_episode = jax.jit(lambda k: evaluate_policy(adapter, policy.act, k, args.episodes))(
-        jax.random.PRNGKey(args.seed))
+        key)
   m = {k: np.asarray(v, np.float64) for k, v in jax.device_get(per_episode).items()}
   result = {
       "episodes": args.episodes,
@@ -452,6 +469,8 @@ def run_eval(args) -> int:
       # Above the limit in force outside the ticks where a slower zone is entered: 0 when the clip
       # holds from the tick after every entry.
       "speed_excess_outside_entry_s": float(m["speed_violation_outside_entry_s"].sum()),
+      # Steps whose action had a NaN (the env replaced it by 0): a sound policy has none.
+      "bad_action_steps": int(round(m["bad_action"].sum())),
       **{_OTHER_METRICS.get(key, f"{key}_per_episode"): float(v.mean()) for key, v in m.items()
          if key not in _HEADLINE},
       "policy": str(args.policy), "seed": args.seed, "map": scenario_args.map_label(args),
@@ -469,6 +488,7 @@ def run_eval(args) -> int:
           ("goals per episode", f"{result['goals_per_episode']:.3f}"),
           ("keepout entries", f"{result['keepout_entries']} in all"),
           ("collisions", f"{result['collisions']} in all"),
+          ("bad actions", f"{result['bad_action_steps']} steps in all (NaN actions the env replaced by 0)"),
           ("above speed limit", f"{result['speed_excess_s']:.4f} s per episode"),
           ("mean return", f"{result['mean_return']:.3f}"),
           ("clipped command", f"{result['clipped_per_episode']:.4f} m per episode"),

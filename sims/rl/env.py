@@ -107,6 +107,9 @@ State = mjx_env.State
 # ----------------------------------------------------------------------------- config
 
 
+MAX_CONFIG_VALUE = 1e6     # largest float of a NavEnvConfig (reward weights, metres)
+
+
 @dataclasses.dataclass(frozen=True)
 class NavEnvConfig:
   """Static options of `NavEnv` (one compile per distinct config).
@@ -168,10 +171,16 @@ class NavEnvConfig:
       if f.name in ("mode", "keepout", "crop_cells", "costmap_stop"):
         continue
       v = getattr(self, f.name)
+      want = "> 0" if f.name == "crop_spacing" else ">= 0"
       if isinstance(v, bool) or not isinstance(v, (int, float, np.floating, np.integer)) \
           or not np.isfinite(v) or v < 0 or (f.name == "crop_spacing" and v == 0):
-        want = "> 0" if f.name == "crop_spacing" else ">= 0"
         raise ValueError(f"NavEnvConfig.{f.name} must be a finite number {want}; got {v!r}")
+      # The env computes in float32: a value float32 makes 0, subnormal or inf is refused, and the
+      # weights and distances stay far enough below float32's range that rewards summed over an
+      # episode stay finite.
+      if v > MAX_CONFIG_VALUE or (v != 0 and abs(float(np.float32(v))) < np.finfo(np.float32).tiny):
+        raise ValueError(f"NavEnvConfig.{f.name} must be 0 or a normal float32 in [{np.finfo(np.float32).tiny:.3g}, "
+                         f"{MAX_CONFIG_VALUE:g}] ({want}); got {v!r}")
       object.__setattr__(self, f.name, float(v))
 
 

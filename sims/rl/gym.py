@@ -19,7 +19,8 @@ the JAX trainer:
     for _ in range(20):                                   # a random policy
         actions = rng.uniform(-1, 1, (8, 2)).astype(np.float32)   # (v, w) per env
         obs, rewards, terminated, truncated, infos = envs.step(actions)
-        next_obs = infos["final_obs"]                     # every env's observation before any reset
+        # Gymnasium's next-step auto-reset: an env that ended here returns its last observation;
+        # its next step resets it (reward 0, not done) and ignores that step's action.
     envs.close()
 
     env = NavGymEnv(episode_length=150, env=nav)          # one env: Gymnasium's Env API
@@ -58,9 +59,19 @@ default) or a collision with a static obstacle sets `terminated`
 `randomize`, a new zone layout), from a JAX PRNG key derived from the seed, so
 `reset(seed=s)` is reproducible.
 
-Auto-reset (`NavVectorEnv`, `metadata["autoreset_mode"] =
-AutoresetMode.SAME_STEP`): an env that ends an episode is reset inside the
-same `step` call; the returned observation is the new episode's first, and
+Auto-reset (`NavVectorEnv`, `metadata["autoreset_mode"]`), Gymnasium's
+default `AutoresetMode.NEXT_STEP` unless `autoreset_mode=` says otherwise:
+the step that ends an episode returns its last observation and
+`terminated`/`truncated`; the env's next `step` resets it, returns the new
+episode's first observation with reward 0 and `terminated = truncated =
+False`, and ignores that env's action (it must still lie in the action space).
+This is what `SyncVectorEnv` does by default and what Gymnasium's vector
+wrappers (`NormalizeObservation`, `NormalizeReward`,
+`RecordEpisodeStatistics`, `ClipAction`) and CleanRL-style loops expect;
+`infos` holds only `"metrics"` (zeros for an env that was reset).
+
+With `autoreset_mode=AutoresetMode.SAME_STEP`, an env that ends an episode is
+reset inside the same `step` call; the returned observation is the new episode's first, and
 `infos["final_obs"]` (float32 [N, D]) holds each env's observation after its
 action, before any reset, with `infos["_final_obs"]` (bool [N]) marking the
 envs that ended (`terminated | truncated`). Rows not marked equal the
@@ -70,10 +81,10 @@ float32 array rather than the object array of `SyncVectorEnv`, so
 `NumpyToTorch` converts it like any other array. `infos["final_info"]`
 holds, for the marked envs (`infos["_final_info"]`), the ended episode's
 `"episode_return"` (float64) and `"episode_length"` (int64).
-`gymnasium.wrappers.vector.RecordEpisodeStatistics` (Gymnasium 1.3) counts
-episodes as next-step auto-reset does, whatever the mode: under this env it
-leaves out the first step of every episode after an env's first, so read the
-episode figures from `final_info` instead.
+In this mode `gymnasium.wrappers.vector.RecordEpisodeStatistics` (Gymnasium 1.3)
+counts episodes as next-step auto-reset does: it leaves out the first step of
+every episode after an env's first, so read the episode figures from
+`final_info` instead; and `NormalizeObservation` refuses the env.
 
 Infos of `step`: `infos["metrics"]` is a dict of float32 [N] (`NavEnv`'s
 per-step metrics: progress, goals_reached, keepout_entries, collisions,
@@ -216,21 +227,23 @@ def _seed_words(rng: np.random.Generator) -> np.ndarray:
 
 
 @functools.lru_cache(maxsize=8)
-def _programs(env: NavEnv, episode_length: int, randomization_fn, num_envs: int | None):
+def _programs(env: NavEnv, episode_length: int, randomization_fn, num_envs: int | None,
+              autoreset_mode: AutoresetMode = AutoresetMode.SAME_STEP):
   """Jitted (reset, step) for one env (num_envs None) or a batch; cached so that wrappers of one
   NavEnv with the same settings share one compile."""
   adapter = GymnaxAdapter(env, episode_length, randomization_fn, full_reset=True)
+
+  def step_one(state: AdapterState, action):
+    """One env step without auto-reset."""
+    st = adapter.run_with_model(state.model_leaves, lambda: adapter.wrapped.step(state.env_state, action))
+    return (AdapterState(st, state.first, state.model_leaves), st.obs, st.reward, st.done > 0,
+            st.info["truncation"] > 0, st.metrics)
 
   if num_envs is None:
     def reset(words):
       return adapter.reset(_key(words))
 
-    def step(state: AdapterState, action):
-      st = adapter.run_with_model(state.model_leaves, lambda: adapter.wrapped.step(state.env_state, action))
-      return (AdapterState(st, state.first, state.model_leaves), st.obs, st.reward, st.done > 0,
-              st.info["truncation"] > 0, st.metrics)
-
-    return jax.jit(reset), jax.jit(step)
+    return jax.jit(reset), jax.jit(step_one)
 
   def reset_v(words):
     keys = jax.random.split(_key(words), num_envs + 1)
@@ -242,7 +255,20 @@ def _programs(env: NavEnv, episode_length: int, randomization_fn, num_envs: int 
     obs, state, reward, done, info = jax.vmap(adapter.step)(keys[1:], state, actions)
     return keys[0], state, obs, reward, done, info["truncation"] > 0, info["final_obs"], info["metrics"]
 
-  return jax.jit(reset_v), jax.jit(step_v)
+  def step_next(key, state, actions, autoreset):
+    """Gymnasium's next-step auto-reset: envs marked in `autoreset` (bool [N], those that ended at
+    the previous call) are reset and their actions ignored (reward 0, not done); the others step."""
+    keys = jax.random.split(key, num_envs + 1)
+    stepped, obs, reward, done, trunc, metrics = jax.vmap(step_one)(state, actions)
+    obs0, state0 = jax.vmap(adapter.reset)(keys[1:])
+    pick = lambda a, b: jnp.where(jnp.reshape(autoreset, autoreset.shape + (1,) * (a.ndim - 1)), a, b)
+    state = jax.tree.map(pick, state0, stepped)
+    metrics = {k: jnp.where(autoreset, jnp.zeros_like(v), v) for k, v in metrics.items()}
+    return (keys[0], state, pick(obs0, obs), jnp.where(autoreset, 0.0, reward).astype(reward.dtype),
+            done & ~autoreset, trunc & ~autoreset, metrics)
+
+  step = step_next if autoreset_mode == AutoresetMode.NEXT_STEP else step_v
+  return jax.jit(reset_v), jax.jit(step)
 
 
 # ----------------------------------------------------------------------------- vector env
@@ -259,6 +285,8 @@ class NavVectorEnv(gymnasium.vector.VectorEnv):
     env: the `NavEnv` to batch (default: the built-in warehouse, 1 robot; with randomize, 16 zone layouts, as `sims.rl.randomization.training_env`).
     randomization_fn: Playground `fn(model, rng) -> (model_v, in_axes)`; only with randomize=True.
     render_mode: None (the env does not render).
+    autoreset_mode: `gymnasium.vector.AutoresetMode.NEXT_STEP` (Gymnasium's default, what its
+      vector wrappers and CleanRL-style loops expect) or `SAME_STEP`; see the module docstring.
 
   `reset(seed=s)` -> (obs float32 [N, D], {}); `step(actions float32 [N, A])` ->
   (obs float32 [N, D], rewards float32 [N], terminated bool [N], truncated
@@ -268,15 +296,22 @@ class NavVectorEnv(gymnasium.vector.VectorEnv):
     ValueError: a bad argument (named, with what is expected).
   """
 
-  metadata = {"autoreset_mode": AutoresetMode.SAME_STEP, "render_modes": []}
+  metadata = {"autoreset_mode": AutoresetMode.NEXT_STEP, "render_modes": []}
 
   def __init__(self, num_envs: int, *, episode_length: int = DEFAULT_EPISODE_LENGTH, randomize: bool = False,
-               env: NavEnv | None = None, randomization_fn: Callable | None = None, render_mode: None = None):
+               env: NavEnv | None = None, randomization_fn: Callable | None = None, render_mode: None = None,
+               autoreset_mode: AutoresetMode = AutoresetMode.NEXT_STEP):
     if isinstance(num_envs, bool) or not isinstance(num_envs, numbers.Integral) or num_envs < 1:
       raise ValueError(f"NavVectorEnv: num_envs must be an integer >= 1; got {num_envs!r}")
     if num_envs > MAX_NUM_ENVS:
       raise ValueError(f"NavVectorEnv: num_envs must be at most 2**21 = {MAX_NUM_ENVS:,d}; got {num_envs!r}")
+    modes = (AutoresetMode.NEXT_STEP, AutoresetMode.SAME_STEP)
+    if not isinstance(autoreset_mode, AutoresetMode) or autoreset_mode not in modes:
+      raise ValueError(f"NavVectorEnv: autoreset_mode must be gymnasium.vector.AutoresetMode.NEXT_STEP or "
+                       f"SAME_STEP; got {autoreset_mode!r}")
     self.env, fn = _resolve(env, episode_length, randomize, randomization_fn, render_mode, "NavVectorEnv")
+    self.autoreset_mode = autoreset_mode
+    self.metadata = {**type(self).metadata, "autoreset_mode": autoreset_mode}
     self.num_envs = int(num_envs)
     self.episode_length = int(episode_length)
     self.render_mode = None
@@ -284,8 +319,9 @@ class NavVectorEnv(gymnasium.vector.VectorEnv):
     self.single_action_space = action_space(self.env)
     self.observation_space = batch_space(self.single_observation_space, self.num_envs)
     self.action_space = batch_space(self.single_action_space, self.num_envs)
-    self._reset, self._step = _programs(self.env, self.episode_length, fn, self.num_envs)
+    self._reset, self._step = _programs(self.env, self.episode_length, fn, self.num_envs, autoreset_mode)
     self._key = self._state = None
+    self._autoreset = np.zeros(self.num_envs, bool)     # NEXT_STEP: envs that ended at the last step
     self._returns = np.zeros(self.num_envs)
     self._lengths = np.zeros(self.num_envs, np.int64)
 
@@ -301,10 +337,12 @@ class NavVectorEnv(gymnasium.vector.VectorEnv):
     self._key, obs, self._state = self._reset(_seed_words(self.np_random))
     self._returns[:] = 0.0
     self._lengths[:] = 0
+    self._autoreset[:] = False
     return np.array(obs), {}
 
   def step(self, actions):
-    """Steps every env with `actions` float32 [N, A] in [-1, 1]; ended episodes restart in this call.
+    """Steps every env with `actions` float32 [N, A] in [-1, 1]; ended episodes restart at the next call
+    (NEXT_STEP) or in this one (SAME_STEP).
 
     Returns:
       (obs float32 [N, D], rewards float32 [N], terminated bool [N], truncated bool [N], infos).
@@ -316,6 +354,14 @@ class NavVectorEnv(gymnasium.vector.VectorEnv):
     if self._state is None:
       raise ResetNeeded("NavVectorEnv.step called before reset(); call reset(seed=...) first")
     a = check_actions(actions, (self.num_envs, self.single_action_space.shape[0]), "NavVectorEnv.step")
+    if self.autoreset_mode == AutoresetMode.NEXT_STEP:
+      self._key, self._state, *out = self._step(self._key, self._state, jnp.asarray(a),
+                                                jnp.asarray(self._autoreset))
+      obs, reward, done, trunc, metrics = jax.tree.map(np.array, jax.device_get(out))
+      truncated = done & trunc
+      terminated = done & ~trunc
+      self._autoreset = done.copy()
+      return obs, reward, terminated, truncated, {"metrics": metrics}
     self._key, self._state, *out = self._step(self._key, self._state, jnp.asarray(a))
     obs, reward, done, trunc, final_obs, metrics = jax.tree.map(np.array, jax.device_get(out))
     truncated = done & trunc
@@ -363,7 +409,8 @@ class NavVectorEnv(gymnasium.vector.VectorEnv):
     self._key = self._state = None
 
   def __repr__(self) -> str:
-    return f"NavVectorEnv(num_envs={self.num_envs}, episode_length={self.episode_length})"
+    return (f"NavVectorEnv(num_envs={self.num_envs}, episode_length={self.episode_length}, "
+            f"autoreset_mode={self.autoreset_mode.name})")
 
 
 # ----------------------------------------------------------------------------- single env

@@ -10,8 +10,9 @@ A policy folder holds two files:
 * `policy.json`: the format name and version, the actor's architecture
   (`hidden_sizes`, `activation`, `observation_size`, `action_size`), the
   env it was trained on (`env_config`: every `NavEnvConfig` field;
-  `robots_per_world`; `episode_length`), the `trainer`, the `jax` version and
-  `extra` (free-form: seed, timesteps, figures).
+  `robots_per_world`; `episode_length`), the `trainer`, the `jax` version,
+  `extra` (free-form: seed, timesteps, figures) and `weights_sha256`, the
+  SHA-256 of `policy.msgpack`'s bytes.
 * `policy.msgpack`: `flax.serialization` msgpack of `{"actor": params,
   "obs_mean": float32 [D], "obs_var": float32 [D]}`; `params` is the
   Gaussian actor's tree (`features/Dense_i/{kernel,bias}`,
@@ -23,17 +24,32 @@ runs the MLP and returns its mean action (float32 [..., A]) clipped to
 [-1, 1]: the same numbers as `sims.rl.ppo.mean_policy` on the train state.
 
 Loading treats the folder as untrusted input. Both files must be regular files
-(a FIFO, device or directory is refused before a byte is read) of at most
-`MAX_JSON_BYTES` / `MAX_MSGPACK_BYTES`; the JSON must match the schema exactly
-(no unknown or missing keys, the stated types, finite numbers, no duplicate
-keys); the weights must be float32 arrays of exactly the shapes the
+(a FIFO, device or directory is refused before a byte is read); the JSON of at
+most `MAX_JSON_BYTES` must match the schema exactly (no unknown or missing keys,
+the stated types, finite numbers, no duplicate keys) and every field that sizes
+work is bounded: at most MAX_LAYERS hidden layers of MAX_HIDDEN units (what
+`jaxfilters rl train --hidden` accepts), observations of MAX_OBSERVATION_SIZE,
+actions of MAX_ACTION_SIZE, MAX_ROBOTS robots per world, episodes of
+MAX_EPISODE_LENGTH steps (`rl train/eval --episode-length`'s bound), a crop of
+MAX_CROP_CELLS, and every float of `env_config` a normal float32 (or 0 where
+`NavEnvConfig` allows it). The weights file may be no larger than the
+architecture's arrays need (`msgpack_size_bound`; at most `MAX_MSGPACK_BYTES`,
+the bound of the largest architecture accepted), its SHA-256 must equal
+`weights_sha256`, and it must hold float32 arrays of exactly the shapes the
 architecture gives, all finite, with variances >= 0. Every problem is a
 `PolicyError` (a ValueError) naming the file and what was expected.
+
+Files of format version 1 (written before the checksum) are refused with a
+message saying so; `add_checksum(folder)` re-writes such a folder's
+`policy.json` as version 2 with the checksum of the weights it holds (the
+weights are checked against the architecture and left unchanged). Run it only
+on weights you trust: the checksum proves the file unchanged since, not sound.
 """
 
 from __future__ import annotations
 
 import dataclasses
+import hashlib
 import json
 import math
 import os
@@ -48,15 +64,19 @@ import numpy as np
 from jaxfilters.map_decode import read_regular_file
 
 FORMAT = "jaxfilters-policy"
-VERSION = 1
+VERSION = 2                # 2: policy.json holds weights_sha256
 JSON_NAME = "policy.json"
 MSGPACK_NAME = "policy.msgpack"
 MAX_JSON_BYTES = 2 ** 20
-MAX_MSGPACK_BYTES = 16 * 2 ** 20
-MAX_HIDDEN = 4096          # units per hidden layer
-MAX_LAYERS = 8
-MAX_SIZE = 1 << 20         # observation or action size
-MAX_CONFIG_INT = 1000      # an integer NavEnvConfig field (crop_cells)
+MAX_HIDDEN = 1024          # units per hidden layer (`rl train --hidden`'s bound)
+MAX_LAYERS = 4             # hidden layers (`rl train --hidden`'s bound)
+MAX_OBSERVATION_SIZE = 4096   # a crop of MAX_CROP_CELLS**2 cells plus the robot's own entries fits
+MAX_ACTION_SIZE = 128      # 2 per robot in velocity mode
+MAX_ROBOTS = 64            # robots_per_world
+MAX_EPISODE_LENGTH = 100_000  # env steps of 0.2 s (`rl train/eval --episode-length`'s bound)
+MAX_CROP_CELLS = 63        # NavEnvConfig.crop_cells: the observed crop is crop_cells**2 values per robot
+MAX_CONFIG_INT = MAX_CROP_CELLS
+_MSGPACK_OVERHEAD = 64 * 2 ** 10   # flax's msgpack framing: names and headers of at most a few dozen arrays
 ACTIVATIONS = {"tanh": jnp.tanh, "relu": jax.nn.relu}   # by the __name__ of flax.linen.tanh / relu
 _NORM_EPS = 1e-8           # rejax's normalize_obs: (x - mean) / sqrt(var + 1e-8)
 
@@ -106,14 +126,20 @@ class Policy:
     """The mean action for obs float32 [..., D]: float32 [..., A] in [-1, 1] (jittable)."""
     return mean_action(self.params, self.activation, obs)
 
+  def raw_action(self, obs: jax.Array) -> jax.Array:
+    """The mean action before the clip to [-1, 1]: float32 [..., A] (jittable); NaN or inf where the
+    weights overflow float32 (what `act` would pass on as NaN, or clip from inf to +-1)."""
+    return mean_action(self.params, self.activation, obs, clip=False)
 
-def mean_action(params: dict, activation: str, obs: jax.Array) -> jax.Array:
-  """The Gaussian actor's mean action, clipped to [-1, 1], with observation normalisation.
+
+def mean_action(params: dict, activation: str, obs: jax.Array, *, clip: bool = True) -> jax.Array:
+  """The Gaussian actor's mean action, clipped to [-1, 1] (unless clip=False), with observation normalisation.
 
   Args:
     params: as `Policy.params`.
     activation: a key of ACTIVATIONS.
     obs: float32 [..., D].
+    clip: clip to the action space [-1, 1] (a NaN stays NaN).
   """
   f = ACTIVATIONS[activation]
   x = jnp.asarray(obs, jnp.float32)
@@ -126,7 +152,13 @@ def mean_action(params: dict, activation: str, obs: jax.Array) -> jax.Array:
     layer = layers[f"Dense_{i}"]
     x = f(x @ layer["kernel"] + row(layer["bias"]))
   mean = x @ p["action_mean"]["kernel"] + row(p["action_mean"]["bias"])
-  return jnp.clip(mean, -1.0, 1.0)
+  return jnp.clip(mean, -1.0, 1.0) if clip else mean
+
+
+def msgpack_size_bound(hidden_sizes, observation_size: int, action_size: int) -> int:
+  """Most bytes a `policy.msgpack` of this architecture may have: its float32 arrays plus framing."""
+  shapes = param_shapes(hidden_sizes, observation_size, action_size)
+  return 4 * sum(math.prod(s) for s in shapes.values()) + _MSGPACK_OVERHEAD
 
 
 def param_shapes(hidden_sizes, observation_size: int, action_size: int) -> dict[str, tuple[int, ...]]:
@@ -143,6 +175,10 @@ def param_shapes(hidden_sizes, observation_size: int, action_size: int) -> dict[
   shapes["obs_mean"] = (observation_size,)
   shapes["obs_var"] = (observation_size,)
   return shapes
+
+
+# The largest weights file any accepted policy.json allows (about 30 MiB).
+MAX_MSGPACK_BYTES = msgpack_size_bound((MAX_HIDDEN,) * MAX_LAYERS, MAX_OBSERVATION_SIZE, MAX_ACTION_SIZE)
 
 
 # ----------------------------------------------------------------------------- save
@@ -165,7 +201,8 @@ def save_policy(folder, algo, train_state, *, env_config, fleet_config, episode_
     The folder.
 
   Raises:
-    ValueError: an actor this format cannot describe, or non-finite weights or notes.
+    ValueError: a policy `load_policy` would refuse (an architecture or env outside the bounds,
+      an activation this format cannot describe, non-finite weights or notes); nothing is written.
   """
   from flax import serialization
   folder = Path(folder)
@@ -188,10 +225,39 @@ def save_policy(folder, algo, train_state, *, env_config, fleet_config, episode_
           "episode_length": int(episode_length), "trainer": "rejax.PPO", "jax": jax.__version__,
           "extra": dict(extra or {})}
   _check_tree(tree, meta, MSGPACK_NAME)
+  weights = serialization.msgpack_serialize(tree)
+  meta["weights_sha256"] = hashlib.sha256(weights).hexdigest()
   text = json.dumps(meta, indent=2, allow_nan=False)
+  check_policy_meta(json.loads(text), JSON_NAME)       # what load_policy will check, before writing
+  if len(weights) > msgpack_size_bound(hidden, meta["observation_size"], meta["action_size"]):
+    raise ValueError(f"{MSGPACK_NAME} would be {len(weights):,d} bytes, above the loader's bound")
   folder.mkdir(parents=True, exist_ok=True)
-  (folder / MSGPACK_NAME).write_bytes(serialization.msgpack_serialize(tree))
+  (folder / MSGPACK_NAME).write_bytes(weights)
   (folder / JSON_NAME).write_text(text + "\n")
+  return folder
+
+
+def add_checksum(folder) -> Path:
+  """Re-writes a version-1 policy folder's `policy.json` as version 2 with the weights' SHA-256.
+
+  The weights are read and checked against the architecture exactly as `load_policy` checks
+  them, and are not changed. Use it only on a folder whose weights you trust.
+
+  Raises:
+    PolicyError: the folder does not hold a valid version-1 (or version-2) policy.
+  """
+  folder = Path(folder)
+  path = folder / JSON_NAME
+  meta = _parse_json(path)
+  if isinstance(meta, dict) and meta.get("version") == 1 and "weights_sha256" not in meta:
+    meta = {**meta, "version": VERSION, "weights_sha256": "0" * 64}
+  meta = check_policy_meta(meta, path)
+  raw = _read(folder / MSGPACK_NAME, msgpack_size_bound(meta["hidden_sizes"], meta["observation_size"],
+                                                          meta["action_size"]))
+  _decode_tree(raw, meta, str(folder / MSGPACK_NAME))
+  meta["weights_sha256"] = hashlib.sha256(raw).hexdigest()
+  path.write_text(json.dumps(meta, indent=2, allow_nan=False) + "\n")
+  load_policy(folder)
   return folder
 
 
@@ -280,23 +346,44 @@ def _json_value_ok(v, depth: int = 0) -> bool:
   return False
 
 
+def _parse_json(path: Path):
+  raw = _read(path, MAX_JSON_BYTES)
+  try:
+    return json.loads(raw.decode("utf-8"), parse_constant=_no_constant, object_pairs_hook=_unique_keys)
+  except (ValueError, RecursionError) as e:        # UnicodeDecodeError and JSONDecodeError are ValueErrors
+    raise PolicyError(f"{path}: not valid JSON ({str(e).splitlines()[0][:200]})") from None
+
+
 def read_policy_json(path: Path) -> dict:
   """`policy.json` read and checked against the schema; returns the dict.
 
   Raises:
     PolicyError: see `load_policy`.
   """
-  raw = _read(path, MAX_JSON_BYTES)
-  try:
-    meta = json.loads(raw.decode("utf-8"), parse_constant=_no_constant, object_pairs_hook=_unique_keys)
-  except (ValueError, RecursionError) as e:        # UnicodeDecodeError and JSONDecodeError are ValueErrors
-    raise PolicyError(f"{path}: not valid JSON ({str(e).splitlines()[0][:200]})") from None
+  return check_policy_meta(_parse_json(path), path)
+
+
+# Fields of policy.json that size work, with their bounds.
+_SIZE_BOUNDS = {"observation_size": MAX_OBSERVATION_SIZE, "action_size": MAX_ACTION_SIZE,
+                "robots_per_world": MAX_ROBOTS, "episode_length": MAX_EPISODE_LENGTH}
+
+
+def check_policy_meta(meta, path) -> dict:
+  """A parsed `policy.json` checked against the schema and the bounds (module docstring); returns it.
+
+  Raises:
+    PolicyError: naming `path` and the key.
+  """
   if not isinstance(meta, dict):
     raise PolicyError(f"{path}: expected a JSON object; got {type(meta).__name__}")
   from sims.rl.env import NavEnvConfig
   defaults = {f.name: f.default for f in dataclasses.fields(NavEnvConfig)}
+  if meta.get("version") == 1 and "weights_sha256" not in meta:
+    raise PolicyError(f"{path}: format version 1 (written before the weights checksum); this reader needs "
+                      f"version {VERSION} with 'weights_sha256': if you trust the weights, "
+                      "sims.rl.policy.add_checksum(folder) adds it")
   keys = {"format", "version", "hidden_sizes", "activation", "observation_size", "action_size", "env_config",
-          "robots_per_world", "episode_length", "trainer", "jax", "extra"}
+          "robots_per_world", "episode_length", "trainer", "jax", "extra", "weights_sha256"}
   unknown, missing = sorted(set(meta) - keys), sorted(keys - set(meta))
   if unknown:
     raise PolicyError(f"{path}: unknown key {unknown[0]!r}; expected exactly {sorted(keys)}")
@@ -316,9 +403,12 @@ def read_policy_json(path: Path) -> dict:
     raise bad("hidden_sizes", f"a list of 1 to {MAX_LAYERS} integers in [1, {MAX_HIDDEN}]")
   if not isinstance(meta["activation"], str) or meta["activation"] not in ACTIVATIONS:
     raise bad("activation", f"one of {sorted(ACTIVATIONS)}")
-  for key in ("observation_size", "action_size", "robots_per_world", "episode_length"):
-    if not _is_int(meta[key]) or not 1 <= meta[key] <= MAX_SIZE:
-      raise bad(key, f"an integer in [1, {MAX_SIZE}]")
+  for key, most in _SIZE_BOUNDS.items():
+    if not _is_int(meta[key]) or not 1 <= meta[key] <= most:
+      raise bad(key, f"an integer in [1, {most:,d}]")
+  sha = meta["weights_sha256"]
+  if not isinstance(sha, str) or len(sha) != 64 or any(c not in "0123456789abcdef" for c in sha):
+    raise bad("weights_sha256", f"the SHA-256 of {MSGPACK_NAME} as 64 lowercase hex digits")
   for key in ("trainer", "jax"):
     if not isinstance(meta[key], str) or len(meta[key]) > 200:
       raise bad(key, "a string of at most 200 characters")
@@ -339,7 +429,7 @@ def read_policy_json(path: Path) -> dict:
       ok, want = isinstance(v, str), "a string"
     elif _is_int(default):     # counts such as crop_cells: bounded so the env stays buildable
       ok, want = _is_int(v) and 0 <= v <= MAX_CONFIG_INT, f"an integer in [0, {MAX_CONFIG_INT}]"
-    elif isinstance(default, float):
+    elif isinstance(default, float):     # float32 terms are NavEnvConfig's check, below
       ok, want = _is_number(v), "a finite number"
     else:                      # a list field (a tuple in NavEnvConfig): JSON values, checked by NavEnvConfig
       ok, want = isinstance(v, list) and _json_value_ok(v), "a list of finite numbers"
@@ -361,14 +451,22 @@ def read_policy_msgpack(path: Path, meta: dict) -> dict:
   Raises:
     PolicyError: see `load_policy`.
   """
+  raw = _read(path, msgpack_size_bound(meta["hidden_sizes"], meta["observation_size"], meta["action_size"]))
+  digest = hashlib.sha256(raw).hexdigest()
+  if digest != meta["weights_sha256"]:
+    raise PolicyError(f"{path}: SHA-256 {digest[:16]}... differs from weights_sha256 {meta['weights_sha256'][:16]}... "
+                      f"in {JSON_NAME}: the weights were changed or damaged after they were saved")
+  return _decode_tree(raw, meta, str(path))
+
+
+def _decode_tree(raw: bytes, meta: dict, path: str) -> dict:
   from flax import serialization
-  raw = _read(path, MAX_MSGPACK_BYTES)
   try:
     tree = serialization.msgpack_restore(raw)
   except Exception as e:  # noqa: BLE001 - the msgpack decoder raises many types on damaged bytes
     raise PolicyError(f"{path}: not a flax msgpack file ({type(e).__name__}: "
                       f"{str(e).splitlines()[0][:150] if str(e) else ''})") from None
-  _check_tree(tree, meta, str(path))
+  _check_tree(tree, meta, path)
   return tree
 
 
@@ -417,6 +515,8 @@ def _short(v) -> str:
   return text if len(text) <= 80 else text[:77] + "..."
 
 
-__all__ = ["ACTIVATIONS", "FORMAT", "JSON_NAME", "MAX_JSON_BYTES", "MAX_MSGPACK_BYTES", "MSGPACK_NAME", "Policy",
-           "PolicyError", "VERSION", "load_policy", "mean_action", "nav_env_config", "param_shapes", "read_policy_json",
+__all__ = ["ACTIVATIONS", "FORMAT", "JSON_NAME", "MAX_ACTION_SIZE", "MAX_CROP_CELLS", "MAX_EPISODE_LENGTH",
+           "MAX_HIDDEN", "MAX_JSON_BYTES", "MAX_LAYERS", "MAX_MSGPACK_BYTES", "MAX_OBSERVATION_SIZE", "MAX_ROBOTS",
+           "MSGPACK_NAME", "Policy", "PolicyError", "VERSION", "add_checksum", "check_policy_meta", "load_policy",
+           "mean_action", "msgpack_size_bound", "nav_env_config", "param_shapes", "read_policy_json",
            "read_policy_msgpack", "save_policy"]

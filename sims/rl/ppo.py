@@ -59,7 +59,7 @@ _F32 = jnp.float32
 
 EVAL_KEYS = ("return", "success", "goals_reached", "keepout_entries", "collisions",
              "speed_violation_s", "speed_violation_after_clip_s", "speed_violation_outside_entry_s", "clipped",
-             "costmap_stops", "length")
+             "costmap_stops", "bad_action", "length")
 
 
 def evaluate_policy(adapter: GymnaxAdapter, act: Callable, key: jax.Array, num_eval: int) -> dict:
@@ -67,7 +67,8 @@ def evaluate_policy(adapter: GymnaxAdapter, act: Callable, key: jax.Array, num_e
 
   Returns:
     dict of float32 [num_eval] per episode: see EVAL_KEYS (success = at least
-    one goal reached before the episode ended).
+    one goal reached before the episode ended; bad_action = steps whose action had a NaN or
+    a value outside [-1, 1], which the env replaced by 0 or clipped).
   """
   def one(k):
     k_model, k_reset = jax.random.split(k)
@@ -82,7 +83,7 @@ def evaluate_policy(adapter: GymnaxAdapter, act: Callable, key: jax.Array, num_e
              "collisions": m["collisions"], "speed_violation_s": m["speed_violation_s"],
              "speed_violation_after_clip_s": m["speed_violation_after_clip_s"],
              "speed_violation_outside_entry_s": m["speed_violation_outside_entry_s"],
-             "costmap_stops": m["costmap_stops"],
+             "costmap_stops": m["costmap_stops"], "bad_action": (m["bad_action"] > 0).astype(_F32),
              "clipped": m["clipped"], "length": jnp.ones((), _F32)}
       acc = {n: acc[n] + jnp.where(alive, add[n], 0.0) for n in acc}
       return (nst, alive & (nst.done == 0), acc), None
@@ -93,6 +94,22 @@ def evaluate_policy(adapter: GymnaxAdapter, act: Callable, key: jax.Array, num_e
     return acc
 
   return jax.vmap(one)(jax.random.split(key, num_eval))
+
+
+def first_actions_finite(adapter: GymnaxAdapter, act: Callable, key: jax.Array, num: int) -> jax.Array:
+  """Whether `act(obs)` is finite on each of `num` first observations (the resets `evaluate_policy`
+  starts from with the same key): bool [num] (jittable).
+
+  A policy whose weights overflow float32 gives NaN or inf actions; the env replaces a NaN action by
+  0 and counts it as `bad_action`, so an evaluation would measure a robot at rest, not the policy.
+  """
+  def one(k):
+    k_model, k_reset = jax.random.split(k)
+    model = adapter.draw_model(k_model)
+    st = adapter.run_with_model(model, lambda: adapter.wrapped.reset(k_reset))
+    return jnp.all(jnp.isfinite(act(st.obs)))
+
+  return jax.vmap(one)(jax.random.split(key, num))
 
 
 def make_ppo(adapter: GymnaxAdapter, *, timesteps_per_call: int, num_envs: int = 32, num_steps: int = 64,
@@ -222,57 +239,113 @@ def replicas_identical(ts) -> bool:
   return True
 
 
-def train_with_curve(adapter: GymnaxAdapter, algo, key: jax.Array, *, num_calls: int, num_eval: int,
+MAX_ENV_STEPS = 2 ** 31 - 1   # rejax counts env steps on the device in an int32 (`global_step`)
+
+
+def plan_training(timesteps: int, num_envs: int, num_steps: int, evals: int) -> list[int]:
+  """PPO iterations of each training call: `timesteps` rounded up to whole iterations, in `evals` calls.
+
+  An iteration is `num_envs` x `num_steps` env steps. The calls are as equal as whole
+  iterations allow (the first ones one iteration longer), so the run is exactly
+  ceil(timesteps / (num_envs x num_steps)) iterations with an evaluation before the first
+  call and after each of the `evals` calls.
+
+  Returns:
+    iterations per call: a list of `evals` integers >= 1.
+
+  Raises:
+    ValueError: a count below 1, more calls than iterations, or a rounded total above
+      MAX_ENV_STEPS (the device's int32 step counter).
+  """
+  for name, v in (("timesteps", timesteps), ("num_envs", num_envs), ("num_steps", num_steps), ("evals", evals)):
+    if isinstance(v, bool) or not isinstance(v, (int, np.integer)) or v < 1:
+      raise ValueError(f"{name} must be an integer >= 1; got {v!r}")
+  per_iter = int(num_envs) * int(num_steps)
+  if timesteps > MAX_ENV_STEPS or per_iter > MAX_ENV_STEPS:
+    raise ValueError(f"timesteps ({timesteps:,d}) and num_envs x num_steps ({per_iter:,d}) must be at most "
+                     f"{MAX_ENV_STEPS:,d} (the env-step counter on the device is an int32)")
+  iters = -(-int(timesteps) // per_iter)
+  if iters * per_iter > MAX_ENV_STEPS:
+    raise ValueError(f"timesteps ({timesteps:,d}) rounded up to whole PPO iterations of {per_iter:,d} env steps "
+                     f"is {iters * per_iter:,d}, above {MAX_ENV_STEPS:,d} (the int32 env-step counter)")
+  if evals > iters:
+    raise ValueError(f"evals ({evals}) must be at most the PPO iterations ({iters}: timesteps {timesteps:,d} "
+                     f"rounded up to whole iterations of num_envs x num_steps = {per_iter:,d} env steps); "
+                     "each evaluation follows at least one iteration")
+  q, r = divmod(iters, int(evals))
+  return [q + (i < r) for i in range(int(evals))]
+
+
+def train_with_curve(adapter: GymnaxAdapter, algo, key: jax.Array, *, calls, num_eval: int,
                      callback: Callable | None = None, mesh=None):
-  """Trains `num_calls` x `algo.total_timesteps` env steps, evaluating before and after each call.
+  """Trains `sum(calls)` PPO iterations in `len(calls)` calls, evaluating before and after each call.
+
+  The env steps reported are the train state's own counter (`global_step`, counted on the
+  device), read back after each call and checked against the iterations asked for.
 
   Args:
-    adapter, algo: from `make_ppo`.
+    adapter, algo: from `make_ppo` (its `timesteps_per_call` is not used here).
     key: PRNG key (init and evaluation keys are split from it).
-    num_calls: training calls; an evaluation follows each (and one precedes the first).
+    calls: PPO iterations of each training call (integers >= 1; `plan_training` makes them).
     num_eval: episodes per evaluation.
     callback: optional `callback(point)` after each evaluation, with `point` a dict
-      of that evaluation's means (EVAL_KEYS), `env_steps`, `index` (0 = before
-      training), `train_s` (cumulative) and `steps_per_s` (the last call's env
+      of that evaluation's means (EVAL_KEYS), `env_steps` (counted on the device), `index`
+      (0 = before training), `train_s` (cumulative) and `steps_per_s` (the last call's env
       steps per second; 0.0 at index 0).
     mesh: optional 1-D device mesh: the env batch is sharded over it (see the
       module docstring); num_envs must be a multiple of its size.
 
   Returns:
-    (final train state, evals: dict name -> float list [num_calls + 1], timing dict
+    (final train state, evals: dict name -> float list [len(calls) + 1], timing dict
     with compile_s (wall time of both compiles, run side by side), compile_train_s and
     compile_eval_s (each from the start of compiling to its end), train_s).
+
+  Raises:
+    ValueError: an empty `calls`, a count below 1, or more env steps than MAX_ENV_STEPS.
+    RuntimeError: the device's step counter disagrees with the iterations run (a bug).
   """
+  calls = list(calls)
+  if not calls or any(isinstance(c, bool) or not isinstance(c, (int, np.integer)) or c < 1 for c in calls):
+    raise ValueError(f"calls must be a non-empty list of PPO iterations >= 1 per call; got {calls!r}")
+  if sum(calls) * algo.num_envs * algo.num_steps > MAX_ENV_STEPS:
+    raise ValueError(f"{sum(calls):,d} PPO iterations of {algo.num_envs * algo.num_steps:,d} env steps exceed "
+                     f"{MAX_ENV_STEPS:,d} (the int32 env-step counter)")
   with jax.numpy_rank_promotion("allow"):     # rejax broadcasts [N, D] - [D] internally
-    return _train_with_curve(adapter, algo, key, num_calls=num_calls, num_eval=num_eval, callback=callback,
-                             mesh=mesh)
+    return _train_with_curve(adapter, algo, key, calls=calls, num_eval=num_eval, callback=callback, mesh=mesh)
 
 
 def train_program(algo, key: jax.Array, mesh=None):
-  """(initial train state, jitted `train(ts) -> ts`) of one training call, the env batch sharded over `mesh`.
+  """(initial train state, jitted `train(ts, num_iterations) -> ts`), the env batch sharded over `mesh`.
 
-  Without a mesh: rejax's program on the default device. With a 1-D mesh
-  (`sims.scale.sharding.make_mesh`): the state placed with `train_state_shardings`
-  and the program of `block_shuffle(algo, mesh)`, compiled for those shardings.
-  Call it under `jax.numpy_rank_promotion("allow")` (rejax broadcasts internally).
+  `train` runs `num_iterations` (an int32 scalar, traced: one compile serves every count)
+  of rejax's PPO iterations (`algo.train_iteration`, what `algo.train` loops over; rejax's
+  own evaluation is off in `make_ppo`). Without a mesh: on the default device. With a 1-D
+  mesh (`sims.scale.sharding.make_mesh`): the state placed with `train_state_shardings` and the
+  iterations of `block_shuffle(algo, mesh)`, compiled for those shardings. Call it under
+  `jax.numpy_rank_promotion("allow")` (rejax broadcasts internally).
 
   Raises:
     ValueError: see `block_shuffle`.
   """
   ts = jax.jit(algo.init_state)(key)
+
+  def iterations(program):
+    return lambda ts, n: jax.lax.fori_loop(0, n, lambda _, t: program.train_iteration(t), ts)
+
   if mesh is None:
-    return ts, jax.jit(lambda ts: algo.train(train_state=ts)[0])
+    return ts, jax.jit(iterations(algo))
   shardings = train_state_shardings(ts, mesh)
   blocked = block_shuffle(algo, mesh)
-  return jax.device_put(ts, shardings), jax.jit(lambda ts: blocked.train(train_state=ts)[0],
-                                                in_shardings=(shardings,), out_shardings=shardings)
+  return jax.device_put(ts, shardings), jax.jit(iterations(blocked), in_shardings=(shardings, None),
+                                                out_shardings=shardings)
 
 
-def _train_with_curve(adapter, algo, key, *, num_calls, num_eval, callback, mesh):
+def _train_with_curve(adapter, algo, key, *, calls, num_eval, callback, mesh):
   k_init, k_eval = jax.random.split(key)
   evaluate = jax.jit(lambda ts, k: {n: jnp.mean(v) for n, v in
                                     evaluate_policy(adapter, mean_policy(algo, ts), k, num_eval).items()})
   ts, train = train_program(algo, k_init, mesh)
+  n0 = np.int32(calls[0])
   # The two programs compile at the same time (XLA compiles outside the GIL): the wall time is
   # the longer compile, not the sum.
   # jax's config contexts are per thread: each compile thread sets rejax's rank promotion again.
@@ -282,26 +355,33 @@ def _train_with_curve(adapter, algo, key, *, num_calls, num_eval, callback, mesh
 
   t0 = time.perf_counter()
   with concurrent.futures.ThreadPoolExecutor(2) as pool:
-    train_f = pool.submit(compile_in_thread, train, ts)
+    train_f = pool.submit(compile_in_thread, train, ts, n0)
     eval_f = pool.submit(compile_in_thread, evaluate, ts, k_eval)
     (train_c, t_train), (eval_c, t_eval) = train_f.result(), eval_f.result()
   evals = {n: [] for n in (*EVAL_KEYS, "env_steps")}
   train_s = 0.0
+  per_iter = algo.num_envs * algo.num_steps
+  start = int(ts.global_step)
 
   def record(ts, i, call_s):
     out = eval_c(ts, jax.random.fold_in(k_eval, i))
     for n, v in out.items():
       evals[n].append(float(v))
-    evals["env_steps"].append(float(ts.global_step))
+    done = int(ts.global_step) - start              # counted on the device
+    want = sum(calls[:i]) * per_iter
+    if done != want:
+      raise RuntimeError(f"the train state counted {done:,d} env steps after {sum(calls[:i])} PPO iterations "
+                         f"of {per_iter:,d}; expected {want:,d} (nothing was saved)")
+    evals["env_steps"].append(float(done))
     if callback is not None:
       point = {n: v[-1] for n, v in evals.items()}
       per_call = evals["env_steps"][-1] - (evals["env_steps"][-2] if i else evals["env_steps"][-1])
       callback({**point, "index": i, "train_s": train_s, "steps_per_s": per_call / call_s if call_s else 0.0})
 
   record(ts, 0, 0.0)
-  for i in range(num_calls):
+  for i, n in enumerate(calls):
     t = time.perf_counter()
-    ts = train_c(ts)
+    ts = train_c(ts, np.int32(n))
     jax.block_until_ready(ts)
     call_s = time.perf_counter() - t
     train_s += call_s

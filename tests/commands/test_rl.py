@@ -12,6 +12,7 @@ from __future__ import annotations
 
 import contextlib
 import dataclasses
+import hashlib
 import importlib.metadata
 import io
 import json
@@ -184,9 +185,11 @@ def write_policy(folder: Path, *, hidden=(4,), obs=98, act=2, meta_edit=None, tr
     meta_edit(meta)
   if tree_edit:
     tree_edit(tree)
+  weights = serialization.msgpack_serialize(tree)
+  meta.setdefault("weights_sha256", hashlib.sha256(weights).hexdigest())    # a meta_edit may set its own
   folder.mkdir(parents=True, exist_ok=True)
   (folder / P.JSON_NAME).write_text(json.dumps(meta))
-  (folder / P.MSGPACK_NAME).write_bytes(serialization.msgpack_serialize(tree))
+  (folder / P.MSGPACK_NAME).write_bytes(weights)
   return folder
 
 
@@ -311,7 +314,7 @@ def _set(path, value):
 
 
 POLICY_ERRORS = [
-    ({"meta_edit": _set("version", 2)}, "'version' must be 1"),
+    ({"meta_edit": _set("version", 3)}, "'version' must be 2"),
     ({"meta_edit": _set("hidden_sizes", [4, 0])}, "'hidden_sizes' must be"),
     ({"meta_edit": _set("observation_size", True)}, "'observation_size' must be an integer"),
     ({"meta_edit": _set("activation", "softsign")}, "'activation' must be one of"),
@@ -350,10 +353,14 @@ def test_policy_files_are_checked_before_reading(tmp_path):
     P.load_policy(folder)
   write_policy(folder)
   (folder / "policy.msgpack").write_bytes(b"\xc1garbage")
+  with pytest.raises(P.PolicyError, match="changed or damaged"):        # the checksum in policy.json
+    P.load_policy(folder)
+  write_policy(folder, meta_edit=_set("weights_sha256", hashlib.sha256(b"\xc1garbage").hexdigest()))
+  (folder / "policy.msgpack").write_bytes(b"\xc1garbage")
   with pytest.raises(P.PolicyError, match="not a flax msgpack file"):
     P.load_policy(folder)
   write_policy(folder)
-  (folder / "policy.json").write_text((folder / "policy.json").read_text().replace('"version": 1', '"version": NaN'))
+  (folder / "policy.json").write_text((folder / "policy.json").read_text().replace('"version": 2', '"version": NaN'))
   with pytest.raises(P.PolicyError, match="not valid JSON"):
     P.load_policy(folder)
   (folder / "policy.json").write_text('{"format": "a", "format": "b"}')

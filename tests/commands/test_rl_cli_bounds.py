@@ -123,6 +123,9 @@ def test_parser_bounds_are_the_librarys():
   """What the commands accept, the library accepts (the CLI names the bounds without importing the env)."""
   from sims.rl import adapter, gym as gym_env, env as rl
   assert rl_cli.MAX_LAYOUTS == rl.MAX_LAYOUTS
+  from sims.rl import policy
+  assert (rl_cli.MAX_HIDDEN_LAYERS, rl_cli.MAX_HIDDEN_UNITS) == (policy.MAX_LAYERS, policy.MAX_HIDDEN)
+  assert rl_cli.MAX_EPISODE_LENGTH == policy.MAX_EPISODE_LENGTH
   assert rl_cli.MAX_ENVS == gym_env.MAX_NUM_ENVS
   assert rl_cli.MAX_EPISODE_LENGTH <= min(adapter.MAX_EPISODE_LENGTH, gym_env.MAX_EPISODE_LENGTH)
   assert rl_cli.MAX_TIMESTEPS * 3 // 2 + rl_cli.MAX_BATCH < 2 ** 31     # rounded up and split: still an int32

@@ -12,8 +12,13 @@ plus format-aware ones: for the JSON, a key dropped, an unknown key, a value of 
 NaN / Infinity / huge or negative numbers, deep nesting, duplicate keys, sizes that no longer
 match the weights, env_config fields changed; for the msgpack, an array dropped or added, another
 shape or dtype, NaN / inf weights, negative variances, a scalar or a string in place of an array,
-deep nesting. Every input must either load (then its weights are float32 of the recorded shapes
-and finite) or raise `PolicyError` (a ValueError) with a short message.
+deep nesting; float edge cases in env_config (subnormal, 0 or inf in float32, -0.0, above the
+bound), sizes at and past their bounds (episode_length, robots, observation and action sizes,
+hidden sizes, crop_cells), and weights_sha256 dropped, changed, upper-cased or shortened, and the
+version set back to 1. Every input must either load or raise `PolicyError` (a ValueError) with a
+short message; a policy that loads must hold float32 weights of the recorded shapes, all finite,
+whose SHA-256 is the recorded one, sizes within the bounds of `sims.rl.policy`, and every env_config
+float 0 or a normal float32 of at most `sims.rl.env.MAX_CONFIG_VALUE`.
 """
 
 from __future__ import annotations
@@ -21,6 +26,7 @@ from __future__ import annotations
 import copy
 import dataclasses
 import functools
+import hashlib
 import json
 import random
 import tempfile
@@ -30,16 +36,29 @@ import numpy as np
 from flax import serialization
 
 from sims.rl import policy as P
-from sims.rl.env import NavEnvConfig   # imported before the fuzz workers' memory limit is set
+from sims.rl.env import MAX_CONFIG_VALUE, NavEnvConfig   # imported before the fuzz workers' memory limit is set
 
 _ARCHS = (((4,), 98, 2), ((3, 5), 98, 2))
 
 
-def _meta(hidden, obs, act) -> dict:
+def _meta(hidden, obs, act, weights: bytes = b"") -> dict:
   return {"format": P.FORMAT, "version": P.VERSION, "hidden_sizes": list(hidden), "activation": "tanh",
           "observation_size": obs, "action_size": act, "env_config": dataclasses.asdict(NavEnvConfig()),
           "robots_per_world": 1, "episode_length": 150, "trainer": "rejax.PPO", "jax": "0.10.2",
-          "extra": {"seed": 0, "note": "fuzz seed"}}
+          "extra": {"seed": 0, "note": "fuzz seed"}, "weights_sha256": hashlib.sha256(weights).hexdigest()}
+
+
+def with_checksum(json_bytes: bytes, msgpack_bytes: bytes) -> bytes:
+  """`json_bytes` with weights_sha256 set to the checksum of `msgpack_bytes` (unchanged if not a JSON
+  object: the loader refuses it for that)."""
+  try:
+    meta = json.loads(json_bytes)
+  except (ValueError, RecursionError):
+    return json_bytes
+  if not isinstance(meta, dict):
+    return json_bytes
+  meta["weights_sha256"] = hashlib.sha256(msgpack_bytes).hexdigest()
+  return json.dumps(meta).encode()
 
 
 def random_tree(hidden, obs, act, seed: int, *, var_floor: float = 0.1) -> dict:
@@ -64,7 +83,11 @@ def _pack(tree) -> bytes:
 @functools.cache
 def valid_pairs() -> list[tuple[bytes, bytes]]:
   """(policy.json, policy.msgpack) bytes of each seed policy."""
-  return [(json.dumps(_meta(*a), indent=2).encode(), _pack(random_tree(*a, seed=i))) for i, a in enumerate(_ARCHS)]
+  out = []
+  for i, a in enumerate(_ARCHS):
+    weights = _pack(random_tree(*a, seed=i))
+    out.append((json.dumps(_meta(*a, weights), indent=2).encode(), weights))
+  return out
 
 
 def json_seeds() -> list[bytes]:
@@ -79,12 +102,48 @@ def msgpack_seeds() -> list[bytes]:
 
 _ODD_VALUES = (None, True, False, 0, -1, 1.5, 2 ** 31, 10 ** 30, -(10 ** 400), "", "x" * 300, [], {}, [1, 2],
                {"a": 1}, "tanh", "relu", "NaN")
+# float32 edge cases: subnormal, 0 and inf in float32, the smallest normal, the bound and past it.
+_FLOAT_EDGES = (1e-45, 1e-40, 1e-50, 1e-320, 1.1754943508222875e-38, 1.1754942e-38, 3.4028235e38, 3.5e38,
+                1e39, 1e308, -0.0, 0.0, 1e6, 1e6 + 1, 5e-324, -1e-45, 0.5, 2.0)
+_SIZE_KEYS = {"episode_length": P.MAX_EPISODE_LENGTH, "robots_per_world": P.MAX_ROBOTS,
+              "observation_size": P.MAX_OBSERVATION_SIZE, "action_size": P.MAX_ACTION_SIZE}
+
+
+def _bound_edit(meta: dict, rng: random.Random) -> None:
+  """A size at or past its bound, a float32 edge case in env_config, or a changed checksum/version."""
+  op = rng.randrange(4)
+  if op == 0:
+    key = rng.choice(sorted(_SIZE_KEYS))
+    most = _SIZE_KEYS[key]
+    meta[key] = rng.choice((most, most + 1, 2 * most, 2 ** 20, 2 ** 31, 2 ** 63, 0))
+    if rng.random() < 0.3:
+      meta["hidden_sizes"] = rng.choice(([P.MAX_HIDDEN] * P.MAX_LAYERS, [P.MAX_HIDDEN + 1],
+                                         [4] * (P.MAX_LAYERS + 1), [2048, 2048]))
+  elif op == 1 and isinstance(meta.get("env_config"), dict):
+    env = meta["env_config"]
+    names = [k for k, v in env.items() if isinstance(v, float)] or list(env) or ["x"]
+    env[rng.choice(names)] = rng.choice(_FLOAT_EDGES)
+    if rng.random() < 0.3:
+      env["crop_cells"] = rng.choice((P.MAX_CROP_CELLS, P.MAX_CROP_CELLS + 2, 1001, 3, 1))
+  elif op == 2:
+    sha = meta.get("weights_sha256")
+    meta["weights_sha256"] = rng.choice((None, "0" * 64, "g" * 64, "", 12,
+                                         sha.upper() if isinstance(sha, str) else "A" * 64,
+                                         sha[:63] if isinstance(sha, str) else "a",
+                                         (sha[:-1] + ("0" if sha[-1:] != "0" else "1")) if isinstance(sha, str)
+                                         else "b" * 64))
+    if rng.random() < 0.2:
+      meta.pop("weights_sha256", None)
+  else:
+    meta["version"] = rng.choice((1, 0, 3, "2", 2.0, True))
+    if rng.random() < 0.5:
+      meta.pop("weights_sha256", None)
 
 
 def _json_text_edit(text: str, rng: random.Random) -> str:
   op = rng.randrange(5)
   if op == 0:
-    return text.replace(rng.choice(('"version": 1', '"observation_size": 98', '"crop_cells": 9')),
+    return text.replace(rng.choice(('"version": 2', '"observation_size": 98', '"crop_cells": 9')),
                         rng.choice(("NaN", "Infinity", "-Infinity", "1e400", "-0", "1" * 5000)), 1)
   if op == 1:                                       # a duplicate key
     return text.replace("{", '{"format": "jaxfilters-policy", ', 1)
@@ -104,6 +163,12 @@ def json_edit(data: bytes, rng: random.Random) -> bytes:
     meta = None
   if not isinstance(meta, dict) or rng.random() < 0.25:
     return _json_text_edit(data.decode("utf-8", "replace"), rng).encode()
+  if rng.random() < 0.35:
+    _bound_edit(meta, rng)
+    try:
+      return json.dumps(meta, allow_nan=True).encode()
+    except (ValueError, RecursionError):
+      return data
   target = meta["env_config"] if isinstance(meta.get("env_config"), dict) and rng.random() < 0.3 else meta
   keys = list(target) or ["x"]
   op = rng.randrange(5)
@@ -204,6 +269,23 @@ def _load_and_check(json_bytes: bytes, msgpack_bytes: bytes):
     a = flat[name]
     if a.dtype != np.float32 or a.shape != shape or not np.isfinite(a).all():
       raise AssertionError(f"loaded {name}: {a.dtype} {a.shape} (want float32 {shape}, finite)")
+  meta = json.loads(json_bytes)
+  if meta.get("weights_sha256") != hashlib.sha256(msgpack_bytes).hexdigest():
+    raise AssertionError("loaded a policy whose weights_sha256 is not the SHA-256 of its weights")
+  sizes = {"episode_length": pol.episode_length, "robots_per_world": pol.robots_per_world,
+           "observation_size": pol.observation_size, "action_size": pol.action_size}
+  for key, most in _SIZE_KEYS.items():
+    if not 1 <= sizes[key] <= most:
+      raise AssertionError(f"loaded {key} = {sizes[key]}, outside [1, {most}]")
+  if len(pol.hidden_sizes) > P.MAX_LAYERS or max(pol.hidden_sizes) > P.MAX_HIDDEN:
+    raise AssertionError(f"loaded hidden sizes {pol.hidden_sizes} past the bounds")
+  tiny = float(np.finfo(np.float32).tiny)
+  for f in dataclasses.fields(pol.env_config):
+    v = getattr(pol.env_config, f.name)
+    if isinstance(v, float) and not (v == 0 or tiny <= v <= MAX_CONFIG_VALUE):
+      raise AssertionError(f"loaded env_config.{f.name} = {v!r}: not 0 or a normal float32 within the bound")
+  if pol.env_config.crop_cells > P.MAX_CROP_CELLS:
+    raise AssertionError(f"loaded crop_cells = {pol.env_config.crop_cells}")
   return pol
 
 
@@ -217,5 +299,7 @@ def run_json(data: bytes):
 
 
 def run_msgpack(data: bytes):
-  """Loads a policy whose policy.msgpack is `data` (beside the first seed's policy.json)."""
-  return _load_and_check(valid_pairs()[0][0], data)
+  """Loads a policy whose policy.msgpack is `data` (beside the first seed's policy.json with the checksum
+  of `data`, as a writer that recomputes it would leave: the decoder and the array checks are fuzzed,
+  not only the checksum)."""
+  return _load_and_check(with_checksum(valid_pairs()[0][0], data), data)

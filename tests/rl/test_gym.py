@@ -1,5 +1,6 @@
 """sims/rl/gym.py: Gymnasium's env checker on NavGymEnv; NavVectorEnv's spaces, seeding, time limit,
-terminals, same-step auto-reset, input checks and per-episode randomisation.
+terminals, same-step auto-reset (the option; next-step, the default, is tests/rl/test_gym_autoreset.py),
+input checks and per-episode randomisation.
 
 One NavEnv serves every env here, and each wrapper compiles once (module fixtures): a single env
 with a 4-step limit and a randomised vector env of 3 envs with a 4-step limit. Robots are placed
@@ -35,7 +36,7 @@ def nav():
 
 @pytest.fixture(scope="module")
 def venv(nav):
-  envs = NavVectorEnv(N, episode_length=T, randomize=True, env=nav)
+  envs = NavVectorEnv(N, episode_length=T, randomize=True, env=nav, autoreset_mode=AutoresetMode.SAME_STEP)
   yield envs
   envs.close()
 
@@ -179,7 +180,8 @@ def test_vector_wrong_actions_raise(venv):
   with pytest.raises(ValueError, match="shape/dtype"):
     venv.state = venv.state.replace(env_state=venv.state.env_state.replace(
         data=venv.state.env_state.data.replace(qpos=qpos[:1])))
-  fresh = NavVectorEnv(N, episode_length=T, randomize=True, env=venv.env)   # shares the compiled programs
+  fresh = NavVectorEnv(N, episode_length=T, randomize=True, env=venv.env,   # shares the compiled programs
+                       autoreset_mode=AutoresetMode.SAME_STEP)
   with pytest.raises(ResetNeeded, match="before reset"):
     fresh.step(ok)
 
