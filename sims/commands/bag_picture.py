@@ -11,7 +11,6 @@ metadata.yaml is one line), or an unknown robot.
 
 from __future__ import annotations
 
-import argparse
 import sys
 
 from jaxfilters import cli as jcli

@@ -94,7 +94,7 @@ from sims.fleet.config import FleetConfig
 from sims.fleet.env import ROBOT_XML, FleetEnv, WorldState, mjx_step
 from sims.fleet.scenario import Scenario
 from sims.fleet.layouts import LayoutBank, LayoutConfig, bank_from_worlds, layout_worlds
-from sims.fleet.world import STATIC_LAYER, WorldParams
+from sims.fleet.world import STATIC_LAYER
 
 _F32 = jnp.float32
 MODES = ("velocity", "navigation")

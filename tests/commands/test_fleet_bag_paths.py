@@ -85,7 +85,7 @@ CASES = [
     (["--bag", "{tmp}/X", "--out", "{tmp}/X"], "must be separate folders"),
     (["--bag", "{tmp}/X", "--out", "{tmp}/X/run"], "must be separate folders"),
     (["--bag", "{tmp}/X/run", "--out", "{tmp}/X"], "must be separate folders"),
-    (["--bag", "{tmp}/X", "--out", "{tmp}/work/../X"], "must be separate folders"),
+    (["--bag", "{tmp}/X", "--out", "{tmp}/sub/../X"], "must be separate folders"),
     (["--bag", ""], "argument --bag: must name a path"),
     (["--bag", "."], "is the current folder or holds it"),
     (["--bag", ".."], "is the current folder or holds it"),

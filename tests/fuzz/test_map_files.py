@@ -29,7 +29,7 @@ import yaml
 from hypothesis import HealthCheck, given, settings, strategies as st
 from PIL import Image
 
-from jaxfilters.map_io import load_map, load_map_image, load_map_with_metadata
+from jaxfilters.map_io import load_map_image, load_map_with_metadata
 from tests.fuzz import fuzz_inputs as fz
 
 _HEALTH = [HealthCheck.too_slow, HealthCheck.function_scoped_fixture]

@@ -221,7 +221,6 @@ def test_input_errors_are_clear(case):
 
 def test_second_call_with_new_values_compiles_nothing(case):
   mask, pts, idx = case
-  from jaxfilters import query
   speed_limit_at(mask, pts, mask_index=idx)
   new_mask = mask.with_data(np.asarray(mask.data)[:, ::-1])
   with count_compiles() as compiles:

@@ -17,7 +17,6 @@ import pytest
 
 from mujoco_playground._src import mjx_env, wrapper
 
-from jaxfilters import constants
 from sims.commands import soak
 from sims.fleet.config import FleetConfig
 from sims.rl.randomization import randomize_zones_and_goals

@@ -9,12 +9,9 @@ cases compile the RL env's reset and one short evaluation.
 from __future__ import annotations
 
 import contextlib
-import dataclasses
 import io
 import json
-import math
 import os
-import shutil
 import types
 from pathlib import Path
 
