@@ -32,7 +32,7 @@ readme-picture: demo
 
 # Two worker processes, each taking whole files (their shared compiled fixtures stay in one process).
 test: $(TEST_STAMP)
-	$(PY) -m pytest -q -n 2 --dist loadfile tests
+	$(PY) -m pytest -q -n 2 --dist loadfile --durations=30 tests
 
 bench: $(TEST_STAMP)
 	$(PY) -m benchmarks

@@ -1,5 +1,5 @@
 """policy.json through `sims.rl.policy.load_policy`: the fuzzer's mutations, a few hundred in-process and
-a short run of the sandboxed fuzzer (`python -m tests.fuzz_inputs --targets policy-json`), whose long
+a short run of the sandboxed fuzzer (`python -m tests.fuzz.fuzz_inputs --targets policy-json`), whose long
 runs (10**5 inputs and more) are the same code with a larger --count."""
 
 from __future__ import annotations
@@ -10,7 +10,7 @@ import sys
 from pathlib import Path
 
 from sims.rl import policy as P
-from tests import fuzz_policy
+from tests.fuzz import fuzz_policy
 
 REPO = Path(__file__).resolve().parents[2]
 
@@ -33,7 +33,7 @@ def test_mutated_policy_json_loads_within_the_bounds_or_is_refused():
 
 
 def test_the_sandboxed_fuzzer_runs_policy_json(tmp_path):
-  run = subprocess.run([sys.executable, "-m", "tests.fuzz_inputs", "--count", "150", "--workers", "1",
+  run = subprocess.run([sys.executable, "-m", "tests.fuzz.fuzz_inputs", "--count", "150", "--workers", "1",
                         "--targets", "policy-json", "--out", str(tmp_path / "f")], cwd=REPO,
                        capture_output=True, text=True, timeout=300)
   assert run.returncode == 0, run.stdout + run.stderr

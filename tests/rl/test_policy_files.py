@@ -23,7 +23,7 @@ import pytest
 from jaxfilters import cli
 from sims.rl import policy as P
 from sims.rl.env import NavEnvConfig
-from tests.fuzz_policy import random_tree
+from tests.fuzz.fuzz_policy import random_tree
 
 REPO = Path(__file__).resolve().parents[2]
 
