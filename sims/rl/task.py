@@ -2,9 +2,12 @@
 
 Its own room so that the env (sims.rl.env) and its per-step kernels (sims.rl.kernels) both import it
 without importing each other.
-"""
 
-from __future__ import annotations
+No `from __future__ import annotations` here: `NavModel` (an `mjx.Model`) makes its `task` field
+a pytree node only if NavTask's field annotations are real types (mjx reads `field.type` to find
+arrays); as strings they would turn the task into static metadata, and per-env randomisation of
+goals and zones would silently do nothing.
+"""
 
 import dataclasses
 

@@ -104,7 +104,7 @@ def test_refused_devices_leave_no_out_folder(tmp_path, capsys):
   n = len(jax.devices()) + 1
   out = tmp_path / "o"
   rc, lines = _run(["rl", "train", "--timesteps", "64", "--num-envs", str(4 * n), "--num-steps", "8",
-                    "--minibatches", "1", "--devices", str(n), "--out", str(out)], capsys)
+                    "--minibatches", "1", "--evals", "1", "--devices", str(n), "--out", str(out)], capsys)
   assert rc == 2 and len(lines) == 1 and "--devices" in lines[0], lines
   assert not out.exists()
 
