@@ -32,8 +32,8 @@ import numpy as np
 from jaxfilters import constants
 from jaxfilters import geometry
 from jaxfilters.mask_lookup import mask_cell, mask_leaves, transform_point
-from jaxfilters.types import (FilterInfo, FilterMask, mask_geometry_ok, per_robot_bool, pytree_dataclass,
-                              robot_inputs)
+from jaxfilters.types import (FilterInfo, FilterMask, check_robot_inputs, mask_geometry_ok, per_robot_bool,
+                              pytree_dataclass, robot_inputs)
 
 _F32 = jnp.float32
 
@@ -286,12 +286,17 @@ def speed_filter(mask: FilterMask, poses, state: SpeedState, *, mask_index=None,
   Returns:
     (new SpeedState, SpeedResult [B]).
   """
-  _, idx, idx_ok, poses, enabled, transform = speed_inputs(mask, poses, state, mask_index, enabled, transform)
-  return _speed_filter_jit(mask, poses, state, idx, idx_ok, enabled, transform)
+  if not isinstance(state, SpeedState):
+    raise TypeError(f"state must be a SpeedState (SpeedState.create); got {type(state).__name__}")
+  # The checks here, in Python; the conversions in the program (no eager device operation).
+  inputs = check_robot_inputs(mask, poses, state.speed_limit_prev.shape[0], mask_index, enabled, transform,
+                              state=state)
+  return _speed_filter_jit(mask, state, *inputs)
 
 
 @jax.jit
-def _speed_filter_jit(mask, poses, state, idx, idx_ok, enabled, transform):
+def _speed_filter_jit(mask, state, poses, mask_index, enabled, transform):
+  _, idx, idx_ok, poses, enabled, transform = speed_inputs(mask, poses, state, mask_index, enabled, transform)
   with jax.named_scope("speed_filter"):
     idx_ok = idx_ok & mask_geometry_ok(mask)[idx]
 

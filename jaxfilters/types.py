@@ -286,6 +286,18 @@ def mask_geometry_ok(mask: FilterMask) -> jax.Array:
   return ok
 
 
+def check_mask_index_host(host: np.ndarray, m: int, num_robots: int) -> None:
+  """A concrete mask_index (NumPy) is an integer [B] array in [0, M) (`resolve_mask_index`'s host checks)."""
+  if host.shape != (num_robots,) or not (np.issubdtype(host.dtype, np.integer)):
+    raise ValueError(f"mask_index must be an integer array of shape ({num_robots},); "
+                     f"got {host.dtype}{tuple(host.shape)}")
+  bad = np.nonzero((host < 0) | (host >= m))[0]
+  if bad.size:
+    raise ValueError(f"mask_index must lie in [0, {m}) (the FilterMask holds {m} masks); robots "
+                     f"{bad[:8].tolist()}{' ...' if bad.size > 8 else ''} have "
+                     f"{host[bad[:8]].tolist()}")
+
+
 def resolve_mask_index(mask: FilterMask, mask_index: jax.Array | None,
                        num_robots: int) -> tuple[jax.Array, jax.Array]:
   """Which mask of the stack each robot uses, and whether that index is in range.
@@ -314,15 +326,7 @@ def resolve_mask_index(mask: FilterMask, mask_index: jax.Array | None,
                        "to say which mask each robot uses; got mask_index=None")
     return jnp.zeros((num_robots,), jnp.int32), jnp.ones((num_robots,), bool)
   if not isinstance(mask_index, jax.core.Tracer):
-    host = np.asarray(mask_index)
-    if host.shape != (num_robots,) or not (np.issubdtype(host.dtype, np.integer)):
-      raise ValueError(f"mask_index must be an integer array of shape ({num_robots},); "
-                       f"got {host.dtype}{tuple(host.shape)}")
-    bad = np.nonzero((host < 0) | (host >= m))[0]
-    if bad.size:
-      raise ValueError(f"mask_index must lie in [0, {m}) (the FilterMask holds {m} masks); robots "
-                       f"{bad[:8].tolist()}{' ...' if bad.size > 8 else ''} have "
-                       f"{host[bad[:8]].tolist()}")
+    check_mask_index_host(np.asarray(mask_index), m, num_robots)
   idx = jnp.asarray(mask_index)
   if idx.shape != (num_robots,) or not jnp.issubdtype(idx.dtype, jnp.integer):
     raise ValueError(f"mask_index must be an integer array of shape ({num_robots},); "
@@ -539,6 +543,61 @@ def check_state_batch(state: Any, num_robots: int, source: str) -> None:
       n = shape[0] if shape else "no"
       raise ValueError(f"{type(state).__name__} has {n} robots ({f.name} {list(shape)}) but {source}; "
                        f"build it with {type(state).__name__}.create for the same B")
+
+
+def host_view(x):
+  """x with .shape and .dtype and no device work: a JAX or NumPy array as it is, else NumPy."""
+  if isinstance(x, (jax.Array, np.ndarray, jax.core.Tracer)):
+    return x
+  return np.asarray(x)
+
+
+def check_robot_inputs(mask: FilterMask, poses: Any, num_robots: int, mask_index=None, enabled=None,
+                       transform=None, *, state: Any = None):
+  """`robot_inputs`' checks at an eager call's edge, with no device work.
+
+  A public function runs this in Python and `robot_inputs` inside its jitted body:
+  the conversions (dtype casts, broadcasts, index flags) then run in the compiled
+  program instead of as one eager device operation each, and a concrete mask_index
+  is still checked on the host. The messages are `robot_inputs`'.
+
+  Returns:
+    (poses, mask_index, enabled, transform): arrays (NumPy for Python values) or None.
+
+  Raises:
+    As `robot_inputs`.
+  """
+  b = num_robots
+  poses = host_view(poses)
+  if state is not None:
+    first = dataclasses.fields(state)[0].name
+    lead = f"{type(state).__name__} has {b} robots ({first} {list(getattr(state, first).shape)})"
+    if poses.ndim == 2 and poses.shape[0] != b:
+      raise ValueError(f"{lead} but poses have {poses.shape[0]} (poses {list(poses.shape)})")
+    check_state_batch(state, b, f"{first} has {b}")
+  check_mask(mask, "filter input")
+  if mask_index is None:
+    if mask.num_masks != 1:
+      resolve_mask_index(mask, None, b)       # raises
+  else:
+    mask_index = host_view(mask_index)
+    if not isinstance(mask_index, jax.core.Tracer):
+      check_mask_index_host(np.asarray(mask_index), mask.num_masks, b)
+  if tuple(poses.shape) != (b, 3):
+    raise ValueError(f"poses must be [B, 3] = ({b}, 3) (x, y, yaw); got {tuple(poses.shape)}")
+  if not jnp.issubdtype(poses.dtype, jnp.floating):
+    raise ValueError(f"poses must be floating point; got {poses.dtype}")
+  if enabled is not None:
+    enabled = host_view(enabled)
+    if enabled.dtype != np.bool_ or tuple(enabled.shape) not in ((), (b,)):
+      raise ValueError(f"enabled must be a bool scalar or bool [B] = ({b},); got {enabled.dtype}"
+                       f"{tuple(enabled.shape)}")
+  if transform is not None:
+    transform = host_view(transform)
+    if tuple(transform.shape) not in ((3,), (b, 3)):
+      raise ValueError(f"transform must be T_mask_from_global (x, y, yaw) of shape (3,) or ({b}, 3); "
+                       f"got {tuple(transform.shape)}")
+  return poses, mask_index, enabled, transform
 
 
 def robot_inputs(mask: FilterMask, poses: Any, num_robots: int, mask_index=None, enabled=None,

@@ -31,7 +31,7 @@ import numpy as np
 from jaxfilters import constants
 from jaxfilters import validate
 from jaxfilters.mask_lookup import mask_cell, mask_leaves, transform_point
-from jaxfilters.types import FilterMask, mask_geometry_ok, pytree_dataclass, robot_inputs
+from jaxfilters.types import FilterMask, check_robot_inputs, mask_geometry_ok, pytree_dataclass, robot_inputs
 
 NUM_ZONES = 128  # int8 mask values 0..127
 
@@ -191,16 +191,19 @@ def zone_filter(mask: FilterMask, poses, state: ZoneState, table: ZoneTable, *, 
   if not isinstance(table, ZoneTable):
     raise TypeError(f"table must be a ZoneTable (ZoneTable.create); got {type(table).__name__}")
   b = state.current.shape[0]
-  idx, idx_ok, poses, enabled, transform = robot_inputs(mask, poses, b, mask_index, enabled, transform,
-                                                        state=state)
+  # The checks here, in Python; the conversions in the program (no eager device operation).
+  poses, mask_index, enabled, transform = check_robot_inputs(mask, poses, b, mask_index, enabled, transform,
+                                                             state=state)
   if state.params.shape[1:] != table.nominal.shape:
     raise ValueError(f"ZoneState has {state.params.shape[1:]} parameters but the table has "
                      f"{table.nominal.shape}; build the state with ZoneState.create(table, B)")
-  return _zone_jit(mask, poses, state, table, idx, idx_ok, enabled, transform)
+  return _zone_jit(mask, state, table, poses, mask_index, enabled, transform)
 
 
 @jax.jit
-def _zone_jit(mask, poses, state, table, idx, idx_ok, enabled, transform):
+def _zone_jit(mask, state, table, poses, mask_index, enabled, transform):
+  idx, idx_ok, poses, enabled, transform = robot_inputs(mask, poses, state.current.shape[0], mask_index, enabled,
+                                                        transform, state=state)
   with jax.named_scope("zone_filter"):
     idx_ok = idx_ok & mask_geometry_ok(mask)[idx]
 

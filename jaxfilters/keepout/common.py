@@ -14,8 +14,8 @@ import jax.numpy as jnp
 
 from jaxfilters import constants
 from jaxfilters.keepout.config import KeepoutConfig, KeepoutState, mask_cost_plus_one_table
-from jaxfilters.types import (Costmap, FilterMask, check_costmap, check_state_batch, costmap_geometry_ok,
-                              mask_geometry_ok, robot_inputs)
+from jaxfilters.types import (Costmap, FilterMask, check_costmap, check_robot_inputs, check_state_batch,
+                              costmap_geometry_ok, host_view, mask_geometry_ok, robot_inputs)
 
 _COST1 = mask_cost_plus_one_table()
 
@@ -119,6 +119,22 @@ def rerun_if_any(need, fast, exact_fn, args, capacity):
   return jax.lax.cond(jnp.any(need), lambda f: rerun(need, f, exact_fn, args, capacity), lambda f: f, fast)
 
 
+def rerun_as(mode, need, fast, exact_fn, args, capacity):
+  """`rerun` as `mode` says, so a path is paid for only when it is taken (STYLE habit 22).
+
+  mode: False or True, decided on the host before tracing (an eager call's `plan.Plan`):
+  nothing runs, or the `rerun` loop; "loop": the loop alone, its trip count data (zero
+  turns when no robot needs it; no conditional); "cond": `rerun_if_any`.
+  """
+  if mode is False:
+    return fast
+  if mode == "cond":
+    return rerun_if_any(need, fast, exact_fn, args, capacity)
+  if mode is not True and mode != "loop":
+    raise ValueError(f"rerun mode must be True, False, 'loop' or 'cond'; got {mode!r}")
+  return rerun(need, fast, exact_fn, args, capacity)
+
+
 def rerun(need, fast, exact_fn, args, capacity):
   """`fast` (a batched pytree) with the robots where `need` replaced by `exact_fn`'s results.
 
@@ -186,6 +202,28 @@ def batched_inputs(costmap, mask, poses, mask_index, enabled, window, transform,
     window = jnp.stack([jnp.maximum(window[:, 0], 0), jnp.maximum(window[:, 1], 0),
                         jnp.minimum(window[:, 2], w), jnp.minimum(window[:, 3], h)], axis=1)
   return idx, idx_ok, poses, enabled, window, transform
+
+
+def check_batched_inputs(costmap, mask, poses, mask_index, enabled, window, transform, where, state):
+  """`batched_inputs`' checks at an eager call's edge, with no device work (`types.check_robot_inputs`).
+
+  Returns:
+    (mask_index, enabled, window, transform): arrays (NumPy for Python values) or None,
+    for a jitted body that runs `batched_inputs` on them.
+  """
+  check_costmap(costmap, where)
+  b = costmap.num_robots
+  h, w = costmap.cost.shape[1:]
+  if not isinstance(state, KeepoutState):
+    raise TypeError(f"{where}: state must be a KeepoutState (KeepoutState.create); got {type(state).__name__}")
+  check_state_batch(state, b, f"costmaps have {b} (cost {list(costmap.cost.shape)})")
+  _, mask_index, enabled, transform = check_robot_inputs(mask, poses, b, mask_index, enabled, transform)
+  if window is not None:
+    window = host_view(window)
+    if tuple(window.shape) not in ((4,), (b, 4)) or not jnp.issubdtype(window.dtype, jnp.integer):
+      raise ValueError(f"window must be integer (min_i, min_j, max_i, max_j) of shape (4,) or ({b}, 4); "
+                       f"got {window.dtype}{tuple(window.shape)}")
+  return mask_index, enabled, window, transform
 
 
 def fill_error(state: KeepoutState, b: int) -> KeepoutState:

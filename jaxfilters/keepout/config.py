@@ -52,8 +52,9 @@ class KeepoutConfig:
       slice (same integers) when, at run time, its exact per-column and
       per-row mask indices are consecutive (same frame, equal
       resolutions up to the float32 rounding of the mask's); False always
-      gathers them through the two index vectors. The choice is made at run
-      time (`lax.cond`), so both are compiled.
+      gathers them through the two index vectors. An eager call makes the
+      choice on the host (keepout/plan.py); inside a caller's `jit` the
+      vectorised loop makes it at run time (`lax.cond`, both compiled).
     kernel: what runs the aligned path's cells: "xla" (one fused XLA loop, every
       backend), "pallas" (the Triton kernel of `jaxfilters.keepout.pallas`, same
       integers; needs a GPU backend, or `pallas.interpret=True`, else

@@ -102,12 +102,16 @@ def _fix_one(new_cost, code, cost, axes, stack, i, mask_origin, mask_res, state,
 
 
 def other_frame_batch(costmap, mask, idx, idx_ok, state, window, enabled, transform, *, config: KeepoutConfig,
-                      loop: str):
+                      loop: str, plan=None):
   """The fast other-frame keepout over a fleet: same integers as the exact path.
 
   `loop` "map" runs the CPU kernel (checked floors, codes, exact fixes), "vmap" the
   edge-table kernel (see the module docstring); a Pallas `config.frame_kernel`
   ("pallas", or "auto" on a GPU) runs the edge tables in Triton whatever the loop.
+  With a `plan` (static: an eager call) the robots that need the exact arithmetic (an
+  undecided cell; a mask outside the edge tables' cover) are not redone here: the
+  batch also returns them, needs bool [B] (process.py redoes them with the exact path).
+  Without one a loop of data-dependent trip count (no conditional) redoes them.
 
   Returns:
     (new cost uint8 [B, H, W], new state).
@@ -129,7 +133,7 @@ def other_frame_batch(costmap, mask, idx, idx_ok, state, window, enabled, transf
                                    field="frame_kernel")
   if loop == "vmap" or frame_pallas:
     return _edges_batch(costmap.cost, mask, axes, idx, state, window, run, config=config,
-                        packed=w % 4 == 0, use_pallas=frame_pallas), new_state
+                        packed=w % 4 == 0, use_pallas=frame_pallas, new_state=new_state, report=plan is not None)
 
   def codes(a):
     ax, i, win, rn = a
@@ -150,6 +154,8 @@ def other_frame_batch(costmap, mask, idx, idx_ok, state, window, enabled, transf
   per_robot = (axes, idx, window, run)
   cost, need = jax.lax.map(chunk, jax.tree.map(split, (per_robot, costmap.cost, state)))
   cost, need = cost.reshape(b, h, w), need.reshape(b)
+  if plan is not None:
+    return cost, new_state, need
 
   def settle(new, old, ax, i, st, win, rn):
     return _fix_one(new, codes((ax, i, win, rn)), old, ax, mask.data, i, mask_origin_terms(mask, i),
@@ -212,9 +218,10 @@ def _edges_one(cost, axes, tables, source, i, mshape, window, run, state, *, con
 
 
 def _edges_batch(cost, mask, axes, idx, state, window, run, *, config: KeepoutConfig, packed: bool,
-                 use_pallas: bool):
+                 use_pallas: bool, new_state, report=False):
   """The edge-table kernel over a fleet (in Pallas with `use_pallas`: `pallas.other_frame_write`),
-  then the exact path for robots of untrusted masks."""
+  then the exact path for robots of untrusted masks (with `report`, those robots are
+  returned instead: (cost, new_state, needs)); (cost, new_state)."""
   b = cost.shape[0]
   _, hm, wm = mask.data.shape
   tx, ty, inv, trusted = edge_tables(mask)
@@ -241,4 +248,6 @@ def _edges_batch(cost, mask, axes, idx, state, window, run, *, config: KeepoutCo
         axes=ax)[0]
     return jax.vmap(one)(c, ax, i, st, win, rn)
 
-  return rerun(run & ~trusted[idx], new, exact, (cost, axes, idx, state, window, run), min(b, 8))
+  if report:
+    return new, new_state, run & ~trusted[idx]
+  return rerun(run & ~trusted[idx], new, exact, (cost, axes, idx, state, window, run), min(b, 8)), new_state

@@ -8,8 +8,9 @@ fast path (same_frame.py, other_resolution.py), the other-frame fast path
 (other_frame.py), or the exact per-cell path (reference.py) for masks too large for
 the fast paths' float32 index arithmetic. Every path gives the exact path's integers.
 
-`keepout_filter` is jitted at the edge: an eager call compiles once per shape and
-config, and inside a caller's `jit` it inlines. A robot whose traced `mask_index` is
+`keepout_filter` is jitted at the edge: an eager call compiles once per shape, config
+and plan, and inside a caller's `jit` it inlines. An eager call decides its
+batch-level choices on the host first (plan.py) and compiles only the path it takes. A robot whose traced `mask_index` is
 outside [0, M) (an eager call raises instead), or whose mask or costmap geometry is
 unusable (a traced NaN, inf, negative, zero or subnormal resolution, a non-finite
 origin: `types.mask_geometry_ok`, `types.costmap_geometry_ok`), is left untouched and
@@ -22,9 +23,11 @@ import dataclasses
 import functools
 
 import jax
+import jax.numpy as jnp
+import numpy as np
 
-from jaxfilters.keepout import pallas
-from jaxfilters.keepout.common import batched_inputs, fill_error, usable_geometry
+from jaxfilters.keepout import pallas, plan
+from jaxfilters.keepout.common import batched_inputs, check_batched_inputs, fill_error, usable_geometry
 from jaxfilters.keepout.config import KeepoutConfig, KeepoutState
 from jaxfilters.keepout.other_frame import other_frame_batch
 from jaxfilters.keepout.reference import general_batch
@@ -78,13 +81,64 @@ def keepout_filter(costmap: Costmap, mask: FilterMask, poses, state: KeepoutStat
   if not isinstance(config, KeepoutConfig):
     raise TypeError(f"config must be a KeepoutConfig; got {type(config).__name__}")
   pallas.use_pallas(config.kernel, config.pallas)   # kernel="pallas" off GPU raises here
-  idx, idx_ok, poses, enabled, window, transform = batched_inputs(
-      costmap, mask, poses, mask_index, enabled, window, transform, "keepout_filter", state)
-  del poses
+  config = _process_config(config)
   _check_index_range(costmap, mask)
-  state = fill_error(state, costmap.num_robots)
-  return filter_batch(costmap, mask, idx, idx_ok, state, window, enabled, transform,
-                      config=_process_config(config))
+  if not plan.is_concrete(costmap, mask, poses, state, mask_index, enabled, window, transform):
+    idx, idx_ok, poses, enabled, window, transform = batched_inputs(
+        costmap, mask, poses, mask_index, enabled, window, transform, "keepout_filter", state)
+    return filter_batch(costmap, mask, idx, idx_ok, fill_error(state, costmap.num_robots), window, enabled,
+                        transform, config=config)
+  # Eager: the checks in Python, the conversions in the program; the fast path with no exact redo
+  # in it, then the robots it reports redone exactly (plan.py).
+  inputs = check_batched_inputs(costmap, mask, poses, mask_index, enabled, window, transform, "keepout_filter",
+                                state)
+  if _exact_only(mask, inputs[3]):
+    return _eager_batch(costmap, mask, state, *inputs, config=config, exact=True)
+  run_plan = plan.make_plan(costmap, mask, state, *inputs, aligned=config.aligned_fast_path, loop=_loop("auto"))
+  out, new_state, needs, batched = _eager_batch(costmap, mask, state, *inputs, config=config, plan=run_plan)
+  redo = np.flatnonzero(np.asarray(needs))
+  if redo.size:
+    idx, idx_ok, window, enabled, transform = batched
+    size = max(8, 1 << int(redo.size - 1).bit_length())      # a power of two: one compile serves many calls
+    sel = np.concatenate([redo, np.full(size - redo.size, redo[0])])
+    # On the host (NumPy): a device gather and scatter would compile once per B.
+    if state.error is None:
+      state = dataclasses.replace(state, error=np.zeros((costmap.num_robots,), bool))
+    sub = jax.tree.map(lambda x: np.asarray(x)[sel], (costmap, idx, idx_ok, state, window, enabled, transform))
+    sub_out, sub_state = _exact_batch(*sub, mask=mask, config=config)
+    # The padding slots (robot redo[0] again) are dropped.
+    out, new_state = jax.tree.map(lambda x, v: _put(x, v, redo), (out, new_state), (sub_out, sub_state))
+  return out, new_state
+
+
+@functools.partial(jax.jit, static_argnames=("config", "exact", "plan"))
+def _eager_batch(costmap, mask, state, mask_index, enabled, window, transform, *, config, exact=False, plan=None):
+  """`batched_inputs` and `filter_batch` in one program (an eager call's)."""
+  idx, idx_ok, _, enabled, window, transform = batched_inputs(
+      costmap, mask, jnp.zeros((costmap.num_robots, 3), jnp.float32), mask_index, enabled, window, transform,
+      "keepout_filter", state)
+  out = _filter_batch(costmap, mask, idx, idx_ok, fill_error(state, costmap.num_robots), window, enabled,
+                      transform, config=config, exact=exact, plan=plan)
+  # With a plan, also the batched inputs, for the exact redo of the robots the fast path reports.
+  return out if plan is None else (*out, (idx, idx_ok, window, enabled, transform))
+
+
+def _put(x, v, rows):
+  a = np.array(x)
+  a[rows] = np.asarray(v)[:rows.size]
+  return jax.device_put(a)
+
+
+def _loop(loop: str) -> str:
+  if loop == "auto":
+    return "map" if jax.default_backend() == "cpu" else "vmap"
+  return loop
+
+
+def _exact_only(mask: FilterMask, transform) -> bool:
+  """Masks too large for the other-frame fast path's float32 index arithmetic run the exact path."""
+  hm, wm = mask.data.shape[1:]
+  return transform is not None and (max(hm, wm) > 2 ** 17 or hm * wm >= 2 ** 24)
 
 
 def _check_index_range(costmap: Costmap, mask: FilterMask) -> None:
@@ -113,9 +167,9 @@ def _process_config(config: KeepoutConfig) -> KeepoutConfig:
                              min_mask_resolution=None, escape_clearance=0.0)
 
 
-@functools.partial(jax.jit, static_argnames=("config", "exact", "loop"))
+@functools.partial(jax.jit, static_argnames=("config", "exact", "loop", "plan"))
 def filter_batch(costmap, mask, idx, idx_ok, state, window, enabled, transform, *, config,
-                 exact=False, loop="auto"):
+                 exact=False, loop="auto", plan=None):
   """The batch behind `keepout_filter`, on inputs `common.batched_inputs` checked.
 
   Args:
@@ -129,23 +183,54 @@ def filter_batch(costmap, mask, idx, idx_ok, state, window, enabled, transform, 
     loop: static; which kernels the fast paths run: "map" (robot by robot, the CPU
       backend's), "vmap" (vectorised over the fleet, the other backends'), or "auto"
       (the default backend's).
+    plan: static `plan.Plan` of an eager call (its batch-level choices, made on the
+      host from its concrete inputs), or None (decided in the program). With a plan
+      no robot is redone exactly and the fast path also returns needs bool [B]: the
+      robots whose cost and state must be redone exactly (plan.py).
 
   Returns:
-    (Costmap with the new cost, new KeepoutState).
+    (Costmap with the new cost, new KeepoutState), and needs with a plan.
   """
+  return _filter_batch(costmap, mask, idx, idx_ok, state, window, enabled, transform, config=config, exact=exact,
+                       loop=loop, plan=plan)
+
+
+def _exact_sub_fleet(costmap, idx, idx_ok, state, window, enabled, transform, *, config, mask):
+  """The redo of an eager call's open robots: the fast path with its exact reruns in the program
+  (what a jitted call runs; the tests hold it to the exact path's integers)."""
+  return _filter_batch(costmap, mask, idx, idx_ok, state, window, enabled, transform, config=config)
+
+
+# The redo runs on a handful of robots, rarely: XLA:CPU's LLVM passes take ~4x longer on its exact
+# arithmetic at the default optimisation level than at 0 (26 s vs 6.4 s under load here), for a
+# program whose run time then hardly matters (a few ms for 16 robots of 60 x 60). The level changes
+# no float semantics (no fast-math either way): the same integers, which
+# tests/jaxfilters/test_keepout_dispatch.py checks against the exact path.
+_EXACT_JITS = {
+    "cpu": jax.jit(_exact_sub_fleet, static_argnames=("config",),
+                   compiler_options={"xla_backend_optimization_level": 0}),
+    "other": jax.jit(_exact_sub_fleet, static_argnames=("config",)),
+}
+
+
+def _exact_batch(*args, **kw):
+  return _EXACT_JITS["cpu" if jax.default_backend() == "cpu" else "other"](*args, **kw)
+
+
+def _filter_batch(costmap, mask, idx, idx_ok, state, window, enabled, transform, *, config,
+                  exact=False, loop="auto", plan=None):
   with jax.named_scope("keepout_filter"):
     out_costmap = costmap
     costmap, mask, idx_ok = usable_geometry(costmap, mask, idx, idx_ok)
-    if loop == "auto":
-      loop = "map" if jax.default_backend() == "cpu" else "vmap"
-    hm, wm = mask.data.shape[1:]
-    if exact or (transform is not None and (max(hm, wm) > 2 ** 17 or hm * wm >= 2 ** 24)):
-      cost, new_state = general_batch(costmap, mask, idx, idx_ok, state, window, enabled, transform,
-                                      config=config)
+    loop = _loop(loop)
+    if exact or _exact_only(mask, transform):
+      if plan is not None:
+        raise ValueError("filter_batch: a plan is for the fast paths (exact=False, masks they take)")
+      res = general_batch(costmap, mask, idx, idx_ok, state, window, enabled, transform, config=config)
     elif transform is None:
-      cost, new_state = same_frame_batch(costmap, mask, idx, idx_ok, state, window, enabled, config=config,
-                                         loop=loop)
+      res = same_frame_batch(costmap, mask, idx, idx_ok, state, window, enabled, config=config, loop=loop,
+                             plan=plan)
     else:
-      cost, new_state = other_frame_batch(costmap, mask, idx, idx_ok, state, window, enabled, transform,
-                                          config=config, loop=loop)
-    return dataclasses.replace(out_costmap, cost=cost), new_state
+      res = other_frame_batch(costmap, mask, idx, idx_ok, state, window, enabled, transform, config=config,
+                              loop=loop, plan=plan)
+    return (dataclasses.replace(out_costmap, cost=res[0]), *res[1:])

@@ -30,7 +30,7 @@ import jax
 import jax.numpy as jnp
 
 from jaxfilters import geometry
-from jaxfilters.keepout.common import rerun_capacity, rerun_if_any, robot_geometry
+from jaxfilters.keepout.common import rerun_as, rerun_capacity, robot_geometry
 from jaxfilters.mask_lookup import mask_origin_terms
 from jaxfilters.keepout.reference import same_frame_window
 
@@ -188,7 +188,7 @@ def slice_test_one(shape, origin, res, mask_origin, mask_res, mshape, box, *, ex
   return sx, sy, sliced, decided
 
 
-def same_frame_prologue(costmap, mask, idx, idx_ok, window, enabled):
+def same_frame_prologue(costmap, mask, idx, idx_ok, window, enabled, *, reruns=("cond", "cond"), flags=False):
   """The same-frame fast path's per-robot scalars, for the whole fleet.
 
   The window clip is bracketed (`_window_bracket`) and the slice test too
@@ -205,6 +205,10 @@ def same_frame_prologue(costmap, mask, idx, idx_ok, window, enabled):
     box (x0, y0, x1, y1) int32 [B] each: the clipped update window, empty ((0, 0, 0, 0))
     where a robot does not run; run bool [B]; sx, sy int32 [B]: the window's start in
     the padded table; sliced bool [B]: the robot's mask cells are that slice.
+
+  `reruns` (window clip, slice test): how the exact reruns run (`common.rerun_as`).
+  With `flags` the bracketed results come back with no rerun, and with them
+  box_known bool [B] and decided bool [B] (what `plan.make_plan` reads).
   """
   b, h, w = costmap.cost.shape
   hm, wm = mask.data.shape[1:]
@@ -226,20 +230,27 @@ def same_frame_prologue(costmap, mask, idx, idx_ok, window, enabled):
   capacity = rerun_capacity(b)
   args = (*geo, idx, window)
   overlap, box, box_known = box_of(False)(args)
-  overlap, box = rerun_if_any(~box_known, (overlap, box), lambda a: box_of(True)(a)[:2], args, capacity)
+  if not flags:
+    overlap, box = rerun_as(reruns[0], ~box_known, (overlap, box), lambda a: box_of(True)(a)[:2], args, capacity)
   run = enabled & overlap & idx_ok
   box = tuple(jnp.where(run, c, 0) for c in box)      # a robot that does not run: an empty window
   args = (*geo, idx, box)
   sx, sy, sliced, decided = slice_of(False)(args)
-  sx, sy, sliced = rerun_if_any(~decided, (sx, sy, sliced), lambda a: slice_of(True)(a)[:3], args, capacity)
+  if flags:
+    return box, run, sx, sy, sliced, box_known, decided
+  sx, sy, sliced = rerun_as(reruns[1], ~decided, (sx, sy, sliced), lambda a: slice_of(True)(a)[:3], args,
+                            capacity)
   return box, run, sx, sy, sliced
 
 
-def index_vectors(costmap, mask, idx):
+def index_vectors(costmap, mask, idx, *, need=None, rerun="cond", flags=False):
   """Every robot's exact index vectors ((mx, vx) int32/bool [B, W], (my, vy) [B, H]).
 
-  Bracketed (`axis_cells`), with the exact division rerun (`rerun_if_any`) for the
-  robots whose bracket left an entry open.
+  Bracketed (`axis_cells`), with the exact division rerun (`common.rerun_as` with mode
+  `rerun`) for the robots whose bracket left an entry open, of those where `need`
+  (bool [B], default all: a robot that reads its cells as a slice does not need them).
+  With `flags` the bracketed vectors come back with no rerun, and with them known bool
+  [B] (the robot's bracket decided every entry).
   """
   b, h, w = costmap.cost.shape
   mshape = mask.data.shape[1:]
@@ -255,5 +266,8 @@ def index_vectors(costmap, mask, idx):
 
   per_robot = lambda fn: jax.vmap(fn, in_axes=(*geo_axes, 0))
   cells, known = per_robot(one)(*geo, idx)
+  if flags:
+    return cells, known
   exact = lambda a: per_robot(functools.partial(one, exact=True))(*a)[0]
-  return rerun_if_any(~known, cells, exact, (*geo, idx), rerun_capacity(b))
+  open_ = ~known if need is None else ~known & need
+  return rerun_as(rerun, open_, cells, exact, (*geo, idx), rerun_capacity(b))
