@@ -174,13 +174,17 @@ def test_occ_to_cost_table_and_rounding_ties():
   assert got[d == 25][0] == 64 and got[d == 75][0] == 191 and 253 not in got
 
 
-def test_write_rule_unknown_master_and_unknown_mask():
-  # testUnknownMasterNonLethalKeepout: master 255, mask 50 -> 127; unknown mask never writes;
-  # mask 0 over unknown writes 0; lower mask cost never lowers a cell.
+@pytest.mark.parametrize("rule, want", [("inscribed", [255, 255, 255, 100]), ("any", [127, 255, 0, 100])])
+def test_write_rule_unknown_master_and_unknown_mask(rule, want):
+  # Nav2 main (#6329, the default "inscribed"): an unknown master cell takes only a mask cost >= 253,
+  # so mask 50 (cost 127) and mask 0 leave it unknown. Before #6329 ("any", Nav2's old
+  # testUnknownMasterNonLethalKeepout): master 255, mask 50 -> 127 and mask 0 over unknown -> 0.
+  # Both: an unknown mask cell never writes; a lower mask cost never lowers a cell.
   mask = _mask(np.array([[50, -1, 0, 10]]), 1.0, (0, 0))
   cm = Costmap.create(np.array([[[255, 255, 255, 100]]], np.uint8), (0, 0), 1.0)
-  out, _ = ko.keepout_filter(cm, mask, np.zeros((1, 3)), ko.KeepoutState.create(1))
-  assert np.asarray(out.cost[0, 0]).tolist() == [127, 255, 0, 100]
+  out, _ = ko.keepout_filter(cm, mask, np.zeros((1, 3)), ko.KeepoutState.create(1),
+                             config=ko.KeepoutConfig(unknown_overwrite=rule))
+  assert np.asarray(out.cost[0, 0]).tolist() == want
 
 
 def test_lanes_give_graded_costs():

@@ -99,7 +99,9 @@ def test_the_exact_redo_compiles_once_per_power_of_two():
   assert _needs(smaller, PLAIN).any()
   with count_compiles() as compiles:
     got = _eager(smaller, PLAIN)
-  assert compiles() == 1
+  # The fast path for the new B; on a GPU also the small program that reads whether every robot is
+  # sliced (keepout/plan.py make_plan). The exact redo is not compiled again.
+  assert compiles() == (1 if jax.default_backend() == "cpu" else 2)
   _assert_equal(got, _exact(smaller, PLAIN))
 
 
