@@ -130,13 +130,21 @@ def use_pallas(kernel: str, tuning: PallasTuning, *, table_bytes: int = 0, backe
 
   Raises:
     ValueError: kernel="pallas" on a backend other than GPU without
-      `interpret=True` (no silent slow path), or a table of 2 GiB or more.
+      `interpret=True` (no silent slow path), a table of 2 GiB or more, or the
+      other-frame kernel in the interpreter on a GPU backend (wrong cells there).
   """
   check_kernel(kernel)
   if kernel == "xla":
     return False
   backend = jax.default_backend() if backend is None else backend
   fits = table_bytes <= _MAX_TABLE_BYTES
+  if field == "frame_kernel" and backend == "gpu" and tuning.interpret and (kernel == "pallas" or fits):
+    # Measured on an H200: the interpreter of the other-frame kernel on a GPU backend gives other
+    # integers than the compiled kernel, the XLA loop and the exact path (which agree).
+    raise ValueError(
+        "PallasTuning(interpret=True) with the other-frame Pallas kernel on a GPU backend gives wrong "
+        "cells (the Pallas interpreter there differs from the compiled kernel); use interpret=False "
+        "(the compiled kernel) or KeepoutConfig(frame_kernel='xla')")
   if kernel == "auto":
     return backend == "gpu" and fits
   if backend != "gpu" and not tuning.interpret:

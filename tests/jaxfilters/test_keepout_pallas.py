@@ -310,6 +310,17 @@ def test_selection_by_backend():
     kp.use_pallas("pallas", tuning, table_bytes=1 << 31, backend="gpu")
 
 
+@pytest.mark.parametrize("kernel", ["pallas", "auto"])
+def test_other_frame_interpreter_on_a_gpu_is_refused(kernel):
+  """On an H200 the interpreter of the other-frame kernel gave other cells than the compiled kernel, the
+  XLA loop and the exact path (which agree): a wrong result with no error, so it is refused."""
+  interp = PallasTuning(interpret=True)
+  with pytest.raises(ValueError, match=r"interpret=True\) with the other-frame Pallas kernel on a GPU backend"):
+    kp.use_pallas(kernel, interp, backend="gpu", field="frame_kernel")
+  assert kp.use_pallas("pallas", interp, backend="cpu", field="frame_kernel")       # the CPU's interpreter is exact
+  assert kp.use_pallas(kernel, PallasTuning(), backend="gpu", field="frame_kernel")  # the compiled kernel
+
+
 def test_filter_entry_point_picks_the_kernel():
   cm, mask, state, window, mask_index, enabled = _fleet(3, b=2, h=5, w=6)
   jaxpr = lambda config: str(jax.make_jaxpr(lambda c: ko.keepout_filter(
