@@ -79,6 +79,16 @@ def test_eager_call_redoes_the_open_robots_exactly(config):
   _assert_equal(_eager(case, config), _exact(case, config))
 
 
+@pytest.mark.parametrize("config", [PLAIN, ESCAPE], ids=["plain", "escape"])
+def test_an_eager_call_with_many_open_robots_runs_the_fleet_on_the_device(config, monkeypatch):
+  """Past HOST_REDO_MAX_FRACTION (and always on a GPU, where the host copy of the fleet cost 100x the
+  filter) the eager call runs the whole fleet once more with the exact reruns in the program."""
+  from jaxfilters.keepout import process
+  case = _edges()
+  monkeypatch.setattr(process, "HOST_REDO_MAX_FRACTION", 0.0)
+  _assert_equal(_eager(case, config), _exact(case, config))
+
+
 def test_eager_other_frame_call_equals_the_exact_path():
   case = _plain(9)
   tf = jnp.asarray(np.float32(np.random.default_rng(9).uniform(-1, 1, (B, 3))))
@@ -91,17 +101,19 @@ def test_eager_call_with_no_open_robot_equals_the_exact_path():
   _assert_equal(_eager(case, PLAIN), _exact(case, PLAIN))
 
 
-def test_the_exact_redo_compiles_once_per_power_of_two():
+def test_the_exact_redo_compiles_once_per_power_of_two(monkeypatch):
   """A fleet of another B whose open robots fit the same sub-fleet compiles only its fast path."""
+  from jaxfilters.keepout import process
+  if jax.default_backend() != "cpu":
+    pytest.skip("off a CPU the open robots are redone on the device, never on the host")
+  monkeypatch.setattr(process, "HOST_REDO_MAX_FRACTION", 1.0)      # this fleet's open robots on the host
   case = _edges()
   _eager(case, PLAIN)
   smaller = _first(case, B - 1)
   assert _needs(smaller, PLAIN).any()
   with count_compiles() as compiles:
     got = _eager(smaller, PLAIN)
-  # The fast path for the new B; on a GPU also the small program that reads whether every robot is
-  # sliced (keepout/plan.py make_plan). The exact redo is not compiled again.
-  assert compiles() == (1 if jax.default_backend() == "cpu" else 2)
+  assert compiles() == 1
   _assert_equal(got, _exact(smaller, PLAIN))
 
 
