@@ -209,7 +209,7 @@ def _bad_inputs(tmp: Path) -> dict:
           "ok": write_policy(tmp / "ok")}
 
 
-TRAIN = "rl train --timesteps 64 --num-envs 4 --num-steps 8"
+TRAIN = "rl train --timesteps 64 --num-envs 4 --num-steps 8 --evals 1"
 BAD = [
     ("rl eval --policy {ok} --episodes 0", "argument --episodes: must lie in [1, 262,144]; got 0"),
     (TRAIN + " --num-envs 0 --out {tmp}/o", "argument --num-envs: must lie in [1, 2,097,152]; got 0"),
