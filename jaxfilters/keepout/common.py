@@ -120,7 +120,7 @@ def rerun_if_any(need, fast, exact_fn, args, capacity):
 
 
 def rerun_as(mode, need, fast, exact_fn, args, capacity):
-  """`rerun` as `mode` says, so a path is paid for only when it is taken (STYLE habit 22).
+  """`rerun` as `mode` says, so a path is paid for only when it is taken.
 
   mode: False or True, decided on the host before tracing (an eager call's `plan.Plan`):
   nothing runs, or the `rerun` loop; "loop": the loop alone, its trip count data (zero

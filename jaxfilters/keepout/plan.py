@@ -1,7 +1,7 @@
 """Internal: an eager keepout call's batch-level choices, made on the host before tracing.
 
 XLA compiles both branches of a `lax.cond`, and on a GPU a batch-level predicate travels
-to the host and back (STYLE habit 22). Each fast path brackets its float32 arithmetic
+to the host and back. Each fast path brackets its float32 arithmetic
 and redoes exactly the few robots a bracket leaves open (an update window or a cell
 centre exactly on a mask-cell edge). Inside a caller's `jit` that redo is part of the
 program. An eager call (concrete inputs: a notebook cell, a Python control loop) instead
