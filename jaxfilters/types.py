@@ -565,7 +565,7 @@ def check_robot_inputs(mask: FilterMask, poses: Any, num_robots: int, mask_index
     (poses, mask_index, enabled, transform): arrays (NumPy for Python values) or None.
 
   Raises:
-    As `robot_inputs`.
+    ValueError: the inputs `robot_inputs` refuses, with its messages.
   """
   b = num_robots
   poses = host_view(poses)
