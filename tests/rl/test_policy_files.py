@@ -8,10 +8,7 @@ cases compile the RL env's reset and one short evaluation.
 
 from __future__ import annotations
 
-import contextlib
-import io
 import json
-import os
 import types
 from pathlib import Path
 
@@ -24,6 +21,7 @@ from jaxfilters import cli
 from sims.rl import policy as P
 from sims.rl.env import NavEnvConfig
 from tests.fuzz.fuzz_policy import random_tree
+from tests.cli_run import run_cli
 
 REPO = Path(__file__).resolve().parents[2]
 
@@ -204,18 +202,6 @@ def test_evaluation_counts_nan_action_steps():
     out = jax.jit(lambda k: evaluate_policy(adapter, nan_always, k, 2))(jax.random.PRNGKey(0))
   np.testing.assert_array_equal(np.asarray(out["bad_action"]), np.asarray(out["length"]))
   assert np.all(np.asarray(out["length"]) >= 1)
-
-
-def run_cli(argv) -> tuple[int, str, str]:
-  out, err = io.StringIO(), io.StringIO()
-  with contextlib.redirect_stdout(out), contextlib.redirect_stderr(err):
-    rc = cli.main(argv)
-  return rc, out.getvalue(), err.getvalue()
-
-
-@pytest.fixture(autouse=True)
-def keep_xla_flags(monkeypatch):
-  monkeypatch.setenv("XLA_FLAGS", os.environ.get("XLA_FLAGS", ""))
 
 
 def test_rl_eval_refuses_non_finite_actions_and_reports_bad_action_steps(tmp_path):

@@ -7,27 +7,12 @@ line; the plan and the refusals are plain arithmetic.
 
 from __future__ import annotations
 
-import contextlib
-import io
 import json
-import os
 
 import pytest
 
-from jaxfilters import cli
 from sims.rl.ppo import MAX_ENV_STEPS, plan_training
-
-
-def run_cli(argv) -> tuple[int, str, str]:
-  out, err = io.StringIO(), io.StringIO()
-  with contextlib.redirect_stdout(out), contextlib.redirect_stderr(err):
-    rc = cli.main(argv)
-  return rc, out.getvalue(), err.getvalue()
-
-
-@pytest.fixture(autouse=True)
-def keep_xla_flags(monkeypatch):
-  monkeypatch.setenv("XLA_FLAGS", os.environ.get("XLA_FLAGS", ""))
+from tests.cli_run import run_cli
 
 
 @pytest.mark.parametrize("timesteps, envs, steps, evals, calls", [
