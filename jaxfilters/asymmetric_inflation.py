@@ -26,7 +26,9 @@ position upcast exactly. The distance transforms and cost tables are
 `jaxfilters.inflation`'s, exact integers.
 
 Each robot runs one `updateCosts` over its whole map (the update window and the ROI
-padded by the radius are then the whole map), with its own path.
+padded by the radius are then the whole map), with its own path. The side of a cell is
+found segment by segment; a short segment (a plan's poses about a cell apart) updates only
+the window of cells its padded box can hold, a long one the whole map (`_sides`).
 """
 
 from __future__ import annotations
@@ -168,30 +170,88 @@ def _segments(path, n, robot_xy, origin, res, h, w, config):
   return (ax, ay, bx, by), valid
 
 
-def _sides(cx, cy, seg, valid, config):
+WINDOW_SLACK = 8
+"""Cells a segment's padded box may exceed 2R + 1 by and still take the windowed pass (see `_sides`)."""
+
+
+def _segment_update(k, cxw, cyw, seg, use, r, carry):
+  """Folds segment k into (min_d, best_k, best_cross) over one window of cell centres: Nav2's
+  computeObstacleSide arithmetic per cell, the smallest dist^2 winning, the lowest k on ties (Nav2
+  walks the segments in order and keeps the first strict minimum)."""
+  min_d, best_k, best_c = carry
+  ki = k.astype(jnp.int32)
+  ax, ay, bx, by = (a[ki] for a in seg)
+  inside = (use[ki] & (cxw >= jnp.minimum(ax, bx) - r) & (cxw <= jnp.maximum(ax, bx) + r)
+            & (cyw >= jnp.minimum(ay, by) - r) & (cyw <= jnp.maximum(ay, by) + r))
+  abx, aby = bx - ax, by - ay
+  len_sq = abx * abx + aby * aby
+  acx, acy = cxw - ax, cyw - ay
+  point = len_sq < MIN_SEGMENT_LENGTH_SQ
+  t = jnp.clip((acx * abx + acy * aby) / jnp.where(point, 1.0, len_sq), 0.0, 1.0)
+  pdx, pdy = acx - t * abx, acy - t * aby
+  dist_sq = jnp.where(point, acx * acx + acy * acy, pdx * pdx + pdy * pdy)
+  cross = jnp.where(point, 0.0, abx * acy - aby * acx)
+  take = inside & ((dist_sq < min_d) | ((dist_sq == min_d) & (k < best_k)))
+  return jnp.where(take, dist_sq, min_d), jnp.where(take, k, best_k), jnp.where(take, cross, best_c)
+
+
+def _cell_span(lo, hi, o, res, n):
+  """Cells [a, b] (clipped to [0, n - 1]) whose centres o + (i + 0.5) res may lie in [lo, hi]: one
+  cell of margin each side, so float64 rounding of the estimate never drops a cell."""
+  a = jnp.floor(jnp.clip((lo - o) / res - 0.5, -4.0, n + 4.0)) - 1
+  b = jnp.ceil(jnp.clip((hi - o) / res - 0.5, -4.0, n + 4.0)) + 1
+  return jnp.maximum(a, 0).astype(jnp.int32), jnp.minimum(b, n - 1).astype(jnp.int32)
+
+
+def _sides(cx, cy, seg, valid, config, origin, res):
   """int8 [H, W]: each cell centre's side (+1 left, -1 right, 0 neutral), Nav2's computeObstacleSide
-  over the segments whose padded box holds the centre, in segment order (first minimum wins)."""
+  over the segments whose padded box holds the centre, in segment order (first minimum wins).
+
+  A segment's padded box spans at most `2R + 1 + WINDOW_SLACK` cells each way when it is short
+  (Nav2's planners space poses about a cell apart): such a segment updates only a window of that
+  size around it. Longer segments update the whole map, in a loop that runs once per long segment.
+  The winner per cell is the smallest dist^2, then the lowest segment index, so the order of the
+  two loops does not matter and the result is the in-order walk's.
+  """
   r = config.inflation_radius
   h, w = cy.shape[0], cx.shape[1]
+  n_seg = valid.shape[0]
+  ws = 2 * config.cell_radius + 1 + WINDOW_SLACK
+  wsx, wsy = min(ws, w), min(ws, h)
+  ax, ay, bx, by = seg
+  x0, x1 = _cell_span(jnp.minimum(ax, bx) - r, jnp.maximum(ax, bx) + r, origin[0], res, w)
+  y0, y1 = _cell_span(jnp.minimum(ay, by) - r, jnp.maximum(ay, by) + r, origin[1], res, h)
+  fits = ((x1 - x0 < wsx) | (wsx == w)) & ((y1 - y0 < wsy) | (wsy == h))
+  sx = jnp.clip(x0, 0, w - wsx)
+  sy = jnp.clip(y0, 0, h - wsy)
+  small = valid & fits
+  large = valid & ~fits
+  cx_row, cy_col = cx[0], cy[:, 0]
 
-  def body(k, carry):
-    min_d, best = carry
-    ax, ay, bx, by = (a[k] for a in seg)
-    inside = (valid[k] & (cx >= jnp.minimum(ax, bx) - r) & (cx <= jnp.maximum(ax, bx) + r)
-              & (cy >= jnp.minimum(ay, by) - r) & (cy <= jnp.maximum(ay, by) + r))
-    abx, aby = bx - ax, by - ay
-    len_sq = abx * abx + aby * aby
-    acx, acy = cx - ax, cy - ay
-    point = len_sq < MIN_SEGMENT_LENGTH_SQ
-    t = jnp.clip((acx * abx + acy * aby) / jnp.where(point, 1.0, len_sq), 0.0, 1.0)
-    pdx, pdy = acx - t * abx, acy - t * aby
-    dist_sq = jnp.where(point, acx * acx + acy * acy, pdx * pdx + pdy * pdy)
-    cross = jnp.where(point, 0.0, abx * acy - aby * acx)
-    take = inside & (dist_sq < min_d)
-    return jnp.where(take, dist_sq, min_d), jnp.where(take, cross, best)
+  def windowed(k, acc):
+    # One float64 [3, H, W] carry (min_d, best_k, best_cross): the window is read and written back
+    # in place (three arrays would each need the others' old window, and XLA copies them all).
+    at = (jnp.int32(0), sy[k], sx[k])
+    part = jax.lax.dynamic_slice(acc, at, (3, wsy, wsx))
+    cxw = jax.lax.dynamic_slice(cx_row, (sx[k],), (wsx,))[None, :]
+    cyw = jax.lax.dynamic_slice(cy_col, (sy[k],), (wsy,))[:, None]
+    md, bk, bc = _segment_update(k.astype(_F64), cxw, cyw, seg, small, r, (part[0], part[1], part[2]))
+    return jax.lax.dynamic_update_slice(acc, jnp.stack([md, bk, bc]), at)
 
-  init = (jnp.full((h, w), np.finfo(np.float64).max, _F64), jnp.zeros((h, w), _F64))
-  min_d, best = jax.lax.fori_loop(0, valid.shape[0], body, init)
+  order = jnp.argsort(~large, stable=True).astype(jnp.int32)   # the long segments first, in order
+  n_large = jnp.sum(large)
+
+  def whole(state):
+    i, acc = state
+    k = order[i]
+    md, bk, bc = _segment_update(k.astype(_F64), cx, cy, seg, large, r, (acc[0], acc[1], acc[2]))
+    return i + 1, jnp.stack([md, bk, bc])
+
+  init = jnp.stack([jnp.full((h, w), np.finfo(np.float64).max, _F64), jnp.full((h, w), float(n_seg), _F64),
+                    jnp.zeros((h, w), _F64)])
+  acc = jax.lax.fori_loop(0, n_seg, windowed, init)
+  _, acc = jax.lax.while_loop(lambda s: s[0] < n_large, whole, (jnp.int32(0), acc))
+  min_d, best = acc[0], acc[2]
   side = jnp.where(best > 0.0, 1, jnp.where(best < 0.0, -1, 0)).astype(jnp.int8)
   return jnp.where(min_d > r * r, jnp.int8(0), side)
 
@@ -240,7 +300,7 @@ def asymmetric_inflate_one(cost: jax.Array, path: jax.Array, path_length: jax.Ar
                            config)
     cx = origin[0] + (jnp.arange(w, dtype=_F64)[None, :] + 0.5) * res
     cy = origin[1] + (jnp.arange(h, dtype=_F64)[:, None] + 0.5) * res
-    side = _sides(cx, cy, seg, valid, config)
+    side = _sides(cx, cy, seg, valid, config, origin, res)
     active = jnp.any(valid)
   seeds = boundary & (side == config.disfavoured_side) & active
   _, cost_by_sq, max_sq = cost_tables(config.disfavoured)

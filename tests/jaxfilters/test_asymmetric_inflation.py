@@ -34,11 +34,11 @@ def _fixture_config(left=10.0, right=10.0, threshold=1.5):
                                       inscribed_radius=0.0, resolution=RES)
 
 
-def _run(costs, paths, config, *, robots=None, origin=(0.0, 0.0)):
+def _run(costs, paths, config, *, robots=None, origin=(0.0, 0.0), npts=P):
   """The fleet of `costs` [B, H, W] with `paths` (lists of points), batched; and the reference's, robot by robot."""
   costs = np.asarray(costs, np.uint8)
   b = costs.shape[0]
-  pts = np.zeros((b, P, 2), np.float32)
+  pts = np.zeros((b, npts, 2), np.float32)
   n = np.zeros(b, np.int32)
   for k, p in enumerate(paths):
     if len(p):
@@ -225,6 +225,36 @@ def test_random_maps_with_ties_equal_the_reference(seed, flags):
                                      inflate_around_unknown=around)
   costs, paths, robots = _tie_fleet(seed, cfg.goal_distance_threshold)
   _run(costs, paths, cfg, robots=robots, origin=(-0.5, -0.25))
+
+
+def test_dense_paths_take_windows_and_equal_the_reference():
+  """Paths as Nav2's planners give them, a pose about a cell apart, on maps larger than the window
+  (2R + 1 + WINDOW_SLACK cells): the short segments update a window each, the few long jumps the
+  whole map, and ties between a short and a long segment (equal dist^2) go to the lower index."""
+  from jaxfilters.asymmetric_inflation import WINDOW_SLACK
+  cfg = jf.AsymmetricInflationConfig(inflation_radius=0.5, cost_scaling_factor_left=1.5, cost_scaling_factor_right=6.0,
+                                     goal_distance_threshold=0.25, inscribed_radius=0.125, resolution=0.125)
+  h, w, b, p = 36, 44, 4, 40
+  assert 2 * cfg.cell_radius + 1 + WINDOW_SLACK < min(h, w)
+  rng = np.random.default_rng(11)
+  costs = np.zeros((b, h, w), np.uint8)
+  costs[rng.random((b, h, w)) < 0.08] = 254
+  costs[rng.random((b, h, w)) < 0.02] = 255
+  paths = []
+  for k in range(b):
+    ij = np.empty((p, 2), np.int64)
+    ij[0] = rng.integers(0, (w, h))
+    for i in range(1, p):
+      ij[i] = ij[i - 1] + rng.integers(-1, 3, 2)
+    if k % 2:   # a long jump (the whole-map pass), then the walk doubles back over itself (ties)
+      ij[p // 2:] = ij[p // 2:] + (-12, 9)
+      ij[3 * p // 4:] = ij[p // 4:p // 2][::-1][:p - 3 * p // 4]
+    if k == 3:  # off the map at the start
+      ij[:4] -= (6, 6)
+    paths.append([tuple(q) for q in (ij + 0.5) * 0.125])
+  got = _run(costs, paths, cfg, robots=[(-5.0, -5.0)] * b, origin=(0.0, 0.0), npts=p)
+  plain = np.asarray(jf.inflate(costs, config=cfg.symmetric))
+  assert np.any(got != plain)   # the second pass raised cells
 
 
 def test_random_maps_decimal_resolution():
