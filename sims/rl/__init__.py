@@ -4,7 +4,8 @@ Rooms: `env` (NavEnv, NavEnvConfig, NavModel: Playground's MjxEnv), `task` (NavT
 step reads), `kernels` (the env's per-step kernels), `randomization` (zones and goals drawn per
 env), `adapter` (the env as a gymnax environment for rejax), `ppo` (training and evaluation),
 `policy` (policy files), `gym` (Gymnasium's Env and VectorEnv; needs the `rl` extra), `registry`
-(the envs by name: Playground's `load`/`get_default_config`, Gymnasium ids).
+(the envs by name: Playground's `load`/`get_default_config`, Gymnasium ids), `brax_compat` (Brax's
+own PPO on this jax).
 
 Imports: `jaxfilters`, `sims.fleet`, `sims.scale` and this package.
 
