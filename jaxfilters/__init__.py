@@ -7,7 +7,8 @@ public functions take an explicit leading robot axis B.
 
 from jaxfilters import constants, jaus, ros
 from jaxfilters._version import __version__
-from jaxfilters.asymmetric_inflation import AsymmetricInflationConfig, asymmetric_inflate
+from jaxfilters.asymmetric_inflation import (AsymmetricInflationConfig, asymmetric_inflate,
+                                             asymmetric_inflate_zones)
 from jaxfilters.binary import BinaryResult, BinaryState, binary_filter
 from jaxfilters.geometry import world_to_cell
 from jaxfilters.grid import OccupancyGrid
@@ -38,7 +39,8 @@ __all__ = [
     "Nav2InflationLayer", "Nav2KeepoutFilter", "Nav2Params", "Nav2ParamsError", "Nav2ParamsWarning", "Nav2Readout",
     "Nav2SpeedFilter", "Nav2ZoneFilter", "OVERLAY_MAX", "OVERLAY_MIN", "OVERLAY_SEQ", "OccupancyGrid", "Polygon",
     "RasterResult", "Shapes", "SpeedResult", "SpeedState", "StaticLayerConfig", "ZoneResult",
-    "ZoneSetpoint", "ZoneState", "ZoneStateConfig", "ZoneTable", "asymmetric_inflate", "binary_at", "binary_filter",
+    "ZoneSetpoint", "ZoneState", "ZoneStateConfig", "ZoneTable", "asymmetric_inflate", "asymmetric_inflate_zones",
+    "binary_at", "binary_filter",
     "constants", "costmap_pipeline", "footprint_radii", "inflate", "jaus", "keepout_cost_at",
     "keepout_filter", "keepout_update_bounds", "load_map", "load_map_image",
     "load_map_with_metadata", "load_params", "occ_to_cost", "rasterize", "rasterize_mask", "ros",

@@ -29,6 +29,14 @@ Each robot runs one `updateCosts` over its whole map (the update window and the 
 padded by the radius are then the whole map), with its own path. The side of a cell is
 found segment by segment; a short segment (a plan's poses about a cell apart) updates only
 the window of cells its padded box can hold, a long one the whole map (`_sides`).
+
+`asymmetric_inflate_zones` scopes the layer to zones drawn on a FilterMask (an option
+beyond Nav2, whose layer is global): inside the zones each cell gets exactly the global
+layer's cost, outside exactly the plain `inflation.inflate` cost with
+`config.symmetric` (pass 1). A costmap cell is inside when the mask cell under its
+centre holds a value other than 0 (1..100, or -1 unknown), read with the keepout
+filter's same-frame rule (`geometry.centres_to_cells_2d`: Nav2's `worldToMap` as an
+exact floor on the host doubles); a centre off the mask is outside.
 """
 
 from __future__ import annotations
@@ -41,11 +49,13 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from jaxfilters import constants, validate
+from jaxfilters import constants, geometry, validate
 from jaxfilters.inflation import InflationConfig, cost_tables, inflate_one, squared_distance
-from jaxfilters.types import Costmap
+from jaxfilters.mask_lookup import mask_origin_terms
+from jaxfilters.types import Costmap, FilterMask, check_mask, mask_geometry_ok, resolve_mask_index
 
-__all__ = ["AsymmetricInflationConfig", "asymmetric_inflate", "asymmetric_inflate_one"]
+__all__ = ["AsymmetricInflationConfig", "asymmetric_inflate", "asymmetric_inflate_one", "asymmetric_inflate_zones",
+           "zone_cells_one"]
 
 _F64 = jnp.float64
 MIN_SEGMENT_LENGTH_SQ = 1e-6
@@ -257,7 +267,8 @@ def _sides(cx, cy, seg, valid, config, origin, res):
 
 
 def asymmetric_inflate_one(cost: jax.Array, path: jax.Array, path_length: jax.Array, robot_xy: jax.Array,
-                           origin_terms, resolution_terms, *, config: AsymmetricInflationConfig) -> jax.Array:
+                           origin_terms, resolution_terms, *, config: AsymmetricInflationConfig,
+                           inside: jax.Array | None = None) -> jax.Array:
   """One robot's `AsymmetricInflationLayer::updateCosts` over its whole map.
 
   Args:
@@ -269,6 +280,8 @@ def asymmetric_inflate_one(cost: jax.Array, path: jax.Array, path_length: jax.Ar
       (`geometry.origin_terms`).
     resolution_terms: list of float32 [] parts whose exact sum is the resolution.
     config: static AsymmetricInflationConfig.
+    inside: bool [H, W] or None (everywhere): the cells pass 2 may raise; the
+      others keep pass 1's cost (`asymmetric_inflate_zones`).
 
   Returns:
     uint8 [H, W].
@@ -307,7 +320,35 @@ def asymmetric_inflate_one(cost: jax.Array, path: jax.Array, path_length: jax.Ar
   dtype = jnp.int16 if (r + 1) ** 2 + r * r <= np.iinfo(np.int16).max else jnp.int32
   sq = squared_distance(seeds, r, dtype).astype(jnp.int32)
   new = jnp.asarray(cost_by_sq)[sq]
-  return jnp.where((sq <= max_sq) & (new > out), new, out)
+  raise_ = (sq <= max_sq) & (new > out)
+  if inside is not None:
+    raise_ = raise_ & inside
+  return jnp.where(raise_, new, out)
+
+
+def zone_cells_one(shape: tuple[int, int], origin_terms, resolution_terms, zones: FilterMask,
+                   i: jax.Array) -> jax.Array:
+  """Which cells of one robot's costmap lie in the zones of mask `i`: bool [H, W].
+
+  A cell is inside when the mask cell under its centre holds a value other than 0
+  (1..100, or -1 unknown); a centre off the mask is outside. Same frame, exact:
+  the keepout filter's `geometry.centres_to_cells_2d` on the host doubles.
+
+  Args:
+    shape: (H, W) of the costmap.
+    origin_terms, resolution_terms: the costmap's geometry as float32 parts
+      (as `asymmetric_inflate_one`).
+    zones: FilterMask stack; i: int32 [] the mask this robot uses.
+
+  Returns:
+    bool [H, W].
+  """
+  h, w = shape
+  hm, wm = zones.shape
+  (mx, vx), (my, vy) = geometry.centres_to_cells_2d((h, w), origin_terms, resolution_terms,
+                                                    mask_origin_terms(zones, i), zones.resolution[i], (hm, wm))
+  value = zones.data[i][my[:, None], mx[None, :]]
+  return vy[:, None] & vx[None, :] & (value != 0)
 
 
 def _concrete(x) -> bool:
@@ -345,6 +386,31 @@ def _check_inputs(b, paths, path_lengths, robot_xy):
   return paths, path_lengths.astype(jnp.int32), robot_xy
 
 
+def _prepare(costmap, paths, path_lengths, robot_xy, config, where):
+  """Checks the common inputs; returns (cost, paths, path_lengths, robot_xy, geometry 4-tuple)."""
+  if not isinstance(config, AsymmetricInflationConfig):
+    raise TypeError(f"config must be an AsymmetricInflationConfig; got {type(config).__name__}")
+  if isinstance(costmap, Costmap):
+    cost = costmap.cost
+    res = costmap.resolution
+    if _concrete(res) and np.any(np.asarray(res) != np.float32(config.resolution)):
+      raise ValueError(f"Costmap resolution {np.asarray(res)} differs from AsymmetricInflationConfig.resolution "
+                       f"{config.resolution!r}; inflate each resolution with its own config")
+    geometry_ = (costmap.origin, costmap.origin_lo, costmap.resolution, costmap.resolution_lo)
+  else:
+    cost = jnp.asarray(costmap)
+    geometry_ = None
+  if cost.ndim != 3 or cost.dtype != jnp.uint8:
+    raise ValueError(f"{where} expects cost uint8 [B, H, W]; got {cost.dtype}{tuple(cost.shape)}")
+  b = cost.shape[0]
+  paths, path_lengths, robot_xy = _check_inputs(b, paths, path_lengths, robot_xy)
+  if geometry_ is None:
+    parts = validate.split_float64(np.asarray([config.resolution], np.float64))
+    geometry_ = (jnp.zeros((b, 2), jnp.float32), None, jnp.full((b,), parts[0, 0], jnp.float32),
+                 jnp.tile(jnp.asarray(parts[:, 1:], jnp.float32), (b, 1)))
+  return cost, paths, path_lengths, robot_xy, geometry_
+
+
 def asymmetric_inflate(costmap: Costmap | jax.Array, *, paths, path_lengths, robot_xy,
                        config: AsymmetricInflationConfig) -> Costmap | jax.Array:
   """Nav2's AsymmetricInflationLayer over a fleet, each robot with its own path.
@@ -375,28 +441,57 @@ def asymmetric_inflate(costmap: Costmap | jax.Array, *, paths, path_lengths, rob
       path points in use or robot positions; a concrete Costmap whose resolution
       differs from float32(config.resolution).
   """
-  if not isinstance(config, AsymmetricInflationConfig):
-    raise TypeError(f"config must be an AsymmetricInflationConfig; got {type(config).__name__}")
-  if isinstance(costmap, Costmap):
-    cost = costmap.cost
-    res = costmap.resolution
-    if _concrete(res) and np.any(np.asarray(res) != np.float32(config.resolution)):
-      raise ValueError(f"Costmap resolution {np.asarray(res)} differs from AsymmetricInflationConfig.resolution "
-                       f"{config.resolution!r}; inflate each resolution with its own config")
-    geometry = (costmap.origin, costmap.origin_lo, costmap.resolution, costmap.resolution_lo)
-  else:
-    cost = jnp.asarray(costmap)
-    geometry = None
-  if cost.ndim != 3 or cost.dtype != jnp.uint8:
-    raise ValueError(f"asymmetric_inflate expects cost uint8 [B, H, W]; got {cost.dtype}{tuple(cost.shape)}")
-  b = cost.shape[0]
-  paths, path_lengths, robot_xy = _check_inputs(b, paths, path_lengths, robot_xy)
-  if geometry is None:
-    parts = validate.split_float64(np.asarray([config.resolution], np.float64))
-    geometry = (jnp.zeros((b, 2), jnp.float32), None, jnp.full((b,), parts[0, 0], jnp.float32),
-                jnp.tile(jnp.asarray(parts[:, 1:], jnp.float32), (b, 1)))
-  out = _batch(cost, paths, path_lengths, robot_xy, *geometry, config=config)
+  cost, paths, path_lengths, robot_xy, geometry_ = _prepare(costmap, paths, path_lengths, robot_xy, config,
+                                                            "asymmetric_inflate")
+  out = _batch(cost, paths, path_lengths, robot_xy, *geometry_, config=config)
   return dataclasses.replace(costmap, cost=out) if isinstance(costmap, Costmap) else out
+
+
+def asymmetric_inflate_zones(costmap: Costmap | jax.Array, zones: FilterMask, *, paths, path_lengths, robot_xy,
+                             config: AsymmetricInflationConfig,
+                             zone_index=None) -> tuple[Costmap | jax.Array, jax.Array]:
+  """The AsymmetricInflationLayer scoped to zones (beyond Nav2; docs/guides/beyond_nav2.md).
+
+  Inside the zones of `zones` every cell gets exactly `asymmetric_inflate`'s cost;
+  outside, exactly `inflate(costmap, config=config.symmetric)`'s (the plain
+  InflationLayer with max(left, right)). The obstacles on the disfavoured side
+  seed the asymmetric pass wherever they are; only the cells it may raise are
+  scoped. A costmap cell is inside when the mask cell under its centre holds a
+  value other than 0 (1..100, or -1 unknown: the higher cost is kept where the
+  mask does not know); a centre off the mask is outside. The mask is in the
+  costmap's frame; its origin and resolution are its own (any map_server mask:
+  `FilterMask.create(load_map(...), FilterInfo.create(...))`, any info type).
+  Jitted at the edge with `config` static: new paths, zones of the same shape and
+  zone indices compile nothing.
+
+  Args:
+    costmap: as `asymmetric_inflate` (cost uint8 [B, H, W]).
+    zones: FilterMask, M = 1 shared or a stack picked per robot by `zone_index`.
+    paths, path_lengths, robot_xy, config: as `asymmetric_inflate`.
+    zone_index: optional int [B], which mask of the stack each robot uses.
+
+  Returns:
+    (the same type as `costmap` with the new cost, error bool [B]). `error` is True
+    for a robot whose zone mask could not be read: a traced `zone_index` outside
+    [0, M), or a mask whose traced geometry is unusable (`types.mask_geometry_ok`).
+    Such a robot gets the global layer's cost everywhere (never the lower, plain one).
+
+  Raises:
+    TypeError: zones that is not a FilterMask, or config that is not an
+      AsymmetricInflationConfig.
+    ValueError: what `asymmetric_inflate` rejects; zones whose leaves have the
+      wrong shapes or dtypes; a stack of several masks without `zone_index`; a
+      `zone_index` that is not int [B], or (concrete) outside [0, M).
+  """
+  check_mask(zones, "asymmetric_inflate_zones: zones")
+  cost, paths, path_lengths, robot_xy, geometry_ = _prepare(costmap, paths, path_lengths, robot_xy, config,
+                                                            "asymmetric_inflate_zones")
+  try:
+    idx, idx_ok = resolve_mask_index(zones, zone_index, cost.shape[0])
+  except ValueError as e:
+    raise ValueError(f"asymmetric_inflate_zones: {str(e).replace('mask_index', 'zone_index')}") from None
+  out, error = _batch_zones(cost, paths, path_lengths, robot_xy, *geometry_, zones, idx, idx_ok, config=config)
+  return (dataclasses.replace(costmap, cost=out) if isinstance(costmap, Costmap) else out), error
 
 
 @functools.partial(jax.jit, static_argnames=("config",))
@@ -409,3 +504,21 @@ def _batch(cost, paths, path_lengths, robot_xy, origin, origin_lo, resolution, r
     axes = (0, 0, 0, 0, 0, None if origin_lo is None else 0, 0, None if resolution_lo is None else 0)
     return jax.vmap(one, in_axes=axes)(cost, paths, path_lengths, robot_xy, origin, origin_lo, resolution,
                                        resolution_lo)
+
+
+@functools.partial(jax.jit, static_argnames=("config",))
+def _batch_zones(cost, paths, path_lengths, robot_xy, origin, origin_lo, resolution, resolution_lo, zones, idx,
+                 idx_ok, *, config):
+  with jax.named_scope("asymmetric_inflate_zones"):
+    ok = idx_ok & mask_geometry_ok(zones)[idx]
+    h, w = cost.shape[1:]
+
+    def one(c, p, n, xy, o, o_lo, r, r_lo, i, good):
+      o_terms = [o] if o_lo is None else [o, o_lo[:, 0], o_lo[:, 1]]
+      r_terms = [r] if r_lo is None else [r, r_lo[0], r_lo[1]]
+      inside = zone_cells_one((h, w), o_terms, r_terms, zones, i) | ~good
+      return asymmetric_inflate_one(c, p, n, xy, o_terms, r_terms, config=config, inside=inside)
+    axes = (0, 0, 0, 0, 0, None if origin_lo is None else 0, 0, None if resolution_lo is None else 0, 0, 0)
+    out = jax.vmap(one, in_axes=axes)(cost, paths, path_lengths, robot_xy, origin, origin_lo, resolution,
+                                      resolution_lo, idx, ok)
+    return out, ~ok

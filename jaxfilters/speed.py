@@ -47,16 +47,20 @@ class SpeedState:
       and never resets it).
     path_start: int32 [B], cached closest-segment index for path lookahead.
     held_lookahead: float32 [B], lookahead distance held while decelerating.
+    path_dropped: bool [B], a reset dropped the held path
+      (`LookaheadConfig.clear_path_on_reset`): the path passed in is ignored
+      until `new_path` says a new one arrived. Always False otherwise.
   """
   speed_limit_prev: jax.Array
   path_start: jax.Array
   held_lookahead: jax.Array
+  path_dropped: jax.Array
 
   @classmethod
   def create(cls, num_robots: int) -> "SpeedState":
     """Nav2's state before the first cycle: last published limit 0.0 (no limit), no path cached."""
     return cls(jnp.zeros((num_robots,), _F32), jnp.zeros((num_robots,), jnp.int32),
-               jnp.zeros((num_robots,), _F32))
+               jnp.zeros((num_robots,), _F32), jnp.zeros((num_robots,), jnp.bool_))
 
 
 @pytree_dataclass
@@ -87,20 +91,44 @@ class SpeedResult:
 class LookaheadConfig:
   """SpeedFilter path lookahead parameters (docs/nav2_semantics.md §5.6), with Nav2's corrections.
 
+  The defaults of `max_path_rewind` and `clear_path_on_reset` are Nav2 main's
+  behaviour (a forward-only cached index, the path kept over a reset); the
+  other values are Nav2 PR #6522's fixes (docs/nav2_semantics.md §5.7).
+
   Attributes:
     max_decel: m/s^2, must be negative to scale the distance with speed; a
       value >= 0 makes the lookahead distance `max_lookahead` (Nav2 WARNs).
     min_lookahead: m, clamped to >= 0.
     max_lookahead: m, raised to min_lookahead if smaller.
+    max_path_rewind: m of path, finite and >= 0. 0 (Nav2 main): the cached
+      start index only moves forward. > 0: each cycle the closest-segment
+      search also covers the segments that start at most this far back along
+      the path from the cached start, so the index follows a robot that
+      reverses; a segment behind wins only if it is strictly closer.
+    clear_path_on_reset: a reset (`reset=` of `speed_filter_lookahead`) also
+      drops the held path, so the filter uses the plain rule at the robot pose
+      until a new path arrives. False (Nav2 main): the path is kept.
   """
   max_decel: float = -0.5
   min_lookahead: float = 0.3
   max_lookahead: float = 5.0
+  max_path_rewind: float = 0.0
+  clear_path_on_reset: bool = False
 
   def __post_init__(self):
-    for name in ("max_decel", "min_lookahead", "max_lookahead"):
+    for name in ("max_decel", "min_lookahead", "max_lookahead", "max_path_rewind"):
       if not np.isfinite(float(getattr(self, name))):
         raise ValueError(f"LookaheadConfig.{name} must be finite; got {getattr(self, name)!r}")
+    rewind = float(self.max_path_rewind)
+    with np.errstate(over="ignore", under="ignore"):
+      rewind32 = np.float32(rewind)
+    if rewind < 0 or (rewind > 0 and not (np.finfo(np.float32).tiny <= rewind32 < np.inf)):
+      raise ValueError(f"LookaheadConfig.max_path_rewind must be 0 (forward only, as Nav2 main) or a normal "
+                       f"float32 > 0 (metres of path the start index may move back per cycle); got {rewind!r}")
+    if not isinstance(self.clear_path_on_reset, (bool, np.bool_)):
+      raise TypeError(f"LookaheadConfig.clear_path_on_reset must be a bool; got "
+                      f"{type(self.clear_path_on_reset).__name__}")
+    object.__setattr__(self, "clear_path_on_reset", bool(self.clear_path_on_reset))
     object.__setattr__(self, "min_lookahead", max(0.0, float(self.min_lookahead)))
     object.__setattr__(self, "max_lookahead", max(float(self.max_lookahead), self.min_lookahead))
 
@@ -185,8 +213,8 @@ def _segment_distance(p, a, b):
 
 
 def speed_lookahead_one(state, data, mask_origin, mask_res, info, pose, path, path_len, new_path,
-                        velocity, enabled, transform=None, *, config: LookaheadConfig):
-  """SpeedFilter::process with path lookahead for one robot (docs/nav2_semantics.md §5.6).
+                        velocity, enabled, transform=None, reset=None, *, config: LookaheadConfig):
+  """SpeedFilter::process with path lookahead for one robot (docs/nav2_semantics.md §5.6-§5.7).
 
   Args:
     state: SpeedState of one robot.
@@ -200,6 +228,10 @@ def speed_lookahead_one(state, data, mask_origin, mask_res, info, pose, path, pa
     transform: float32 [3] T_mask_from_global or None: the pose and the path
       are in the costmap frame and are moved into the mask frame for lookups
       (distances are frame-independent under SE2).
+    reset: bool [] or None (no reset): the filter was reset before this cycle
+      (Nav2 `CostmapFilter::reset`): the cached start index and the held
+      lookahead distance return to 0, and with `config.clear_path_on_reset`
+      the held path is dropped until `new_path`.
     config: static LookaheadConfig.
 
   Returns:
@@ -210,18 +242,37 @@ def speed_lookahead_one(state, data, mask_origin, mask_res, info, pose, path, pa
     path = jnp.stack(geometry.transform_points(transform, path[:, 0], path[:, 1]), axis=-1)
   n = path.shape[0]
   v = jnp.abs(velocity)
+  cached, held_before, dropped = state.path_start, state.held_lookahead, state.path_dropped
+  if reset is not None:                 # initializeFilter: start index and held distance back to 0
+    cached = jnp.where(reset, 0, cached)
+    held_before = jnp.where(reset, 0.0, held_before)
+    if config.clear_path_on_reset:
+      dropped = dropped | reset
+  dropped = dropped & ~new_path         # a path that arrives after the reset is held again
+  path_len = jnp.where(dropped, 0, path_len)
   if config.max_decel < 0:
     dist = jnp.clip(v * v / (2.0 * abs(config.max_decel)), config.min_lookahead, config.max_lookahead)
-    dist = jnp.maximum(dist, state.held_lookahead)
+    dist = jnp.maximum(dist, held_before)
   else:
     dist = jnp.asarray(config.max_lookahead, _F32)
-  start = jnp.where(new_path | (state.path_start >= path_len), 0, state.path_start)
+  start = jnp.where(new_path | (cached >= path_len), 0, cached)
   # Closest segment [i, i+1] from the cached start (first minimum wins).
   seg = jnp.arange(n, dtype=jnp.int32)
   seg_dist = jax.vmap(lambda a, b: _segment_distance(pose[:2], a, b))(path, jnp.roll(path, -1, axis=0))
   seg_ok = (seg >= start) & (seg < path_len - 1)
-  seg_dist = jnp.where(seg_ok, seg_dist, jnp.inf)
-  start = jnp.where(jnp.any(seg_ok), jnp.argmin(seg_dist).astype(jnp.int32), start)
+  ahead = jnp.where(seg_ok, seg_dist, jnp.inf)
+  if config.max_path_rewind == 0:
+    start = jnp.where(jnp.any(seg_ok), jnp.argmin(ahead).astype(jnp.int32), start)
+  else:
+    # Segments behind the cached start whose first pose lies at most max_path_rewind back along
+    # the path; one of them wins only if strictly closer than every segment from the start on.
+    seg_len = jnp.where(seg < path_len - 1, jnp.linalg.norm(jnp.roll(path, -1, axis=0) - path, axis=1), 0.0)
+    to_pose = jnp.cumsum(seg_len) - seg_len       # path length from pose 0 to pose i
+    back_ok = (seg < start) & (seg < path_len - 1) & (to_pose[start] - to_pose <= config.max_path_rewind)
+    behind = jnp.where(back_ok, seg_dist, jnp.inf)
+    i_ahead, i_behind = jnp.argmin(ahead).astype(jnp.int32), jnp.argmin(behind).astype(jnp.int32)
+    best = jnp.where(behind[i_behind] < ahead[i_ahead], i_behind, i_ahead)
+    start = jnp.where(jnp.any(seg_ok) | jnp.any(back_ok), best, start)
   start = jnp.where(path_len <= 1, 0, start)
 
   robot_limit, robot_valid = speed_limit_at_one(data, mask_origin, mask_res, info, pose[:2])
@@ -239,8 +290,8 @@ def speed_lookahead_one(state, data, mask_origin, mask_res, info, pose, path, pa
   has_path = path_len > 0
   limit = jnp.where(has_path, limit, robot_limit)
   prev, changed, ok = _publish_step(state.speed_limit_prev, limit, robot_valid, enabled)
-  new_state = SpeedState(prev, jnp.where(has_path, start, state.path_start),
-                         jnp.where(enabled & has_path, held, state.held_lookahead))
+  new_state = SpeedState(prev, jnp.where(has_path, start, cached),
+                         jnp.where(enabled & has_path, held, held_before), dropped)
   out = SpeedResult(prev, info.type == constants.SPEED_FILTER_PERCENT, changed, ok, jnp.asarray(False))
   return new_state, out
 
@@ -309,14 +360,17 @@ def _speed_filter_jit(mask, state, poses, mask_index, enabled, transform):
 
 
 def speed_filter_lookahead(mask: FilterMask, poses, state: SpeedState, paths, path_lengths,
-                           velocities, *, new_path=None, mask_index=None, enabled=None,
+                           velocities, *, new_path=None, reset=None, mask_index=None, enabled=None,
                            transform=None,
                            config: LookaheadConfig = LookaheadConfig()) -> tuple[SpeedState, SpeedResult]:
-  """Nav2 SpeedFilter with `enable_path_lookahead` over a fleet (docs/nav2_semantics.md §5.6).
+  """Nav2 SpeedFilter with `enable_path_lookahead` over a fleet (docs/nav2_semantics.md §5.6-§5.7).
 
   The strictest (smallest non-zero) limit along each robot's path within the
   lookahead distance is published; robots with path_lengths 0 use the plain
-  filter. Jitted at the edge (config static).
+  filter. Pass the path the filter holds (the last one received) every cycle,
+  with `new_path` True on the cycle it arrives. Jitted at the edge (config
+  static). `config.max_path_rewind` and `config.clear_path_on_reset` select
+  Nav2 PR #6522's fixes; their defaults are Nav2 main's behaviour.
 
   Args:
     mask, poses, state, mask_index, enabled: as speed_filter.
@@ -324,6 +378,12 @@ def speed_filter_lookahead(mask: FilterMask, poses, state: SpeedState, paths, pa
     path_lengths: int [B], valid poses per path, each in [0, N].
     velocities: float [B], smoothed odometry linear speed (m/s).
     new_path: optional bool [B] or scalar, a new path arrived this cycle.
+    reset: optional bool [B] or scalar, the filter was reset since the last
+      cycle (Nav2 `CostmapFilter::reset`, e.g. a costmap clear): the cached
+      start index and the held lookahead distance return to 0; with
+      `config.clear_path_on_reset` the held path is also dropped, and the
+      robot uses the plain filter until a cycle with `new_path` True (a path
+      arriving in the reset's cycle is held). None: no reset.
     transform: optional [B, 3] or [3] T_mask_from_global: poses and paths are
       in the costmap frame, the mask in another (as speed_filter).
     config: static LookaheadConfig.
@@ -354,22 +414,24 @@ def speed_filter_lookahead(mask: FilterMask, poses, state: SpeedState, paths, pa
   if vel.shape != (b,):
     raise ValueError(f"velocities must be float [B] = ({b},); got {tuple(vel.shape)}")
   new_path = per_robot_bool("new_path", new_path, b, default=False)
-  return _lookahead_jit(mask, poses, state, paths, lengths.astype(jnp.int32), vel, new_path, idx, idx_ok,
+  reset = None if reset is None else per_robot_bool("reset", reset, b, default=False)
+  return _lookahead_jit(mask, poses, state, paths, lengths.astype(jnp.int32), vel, new_path, reset, idx, idx_ok,
                         enabled, transform, config=config)
 
 
 @functools.partial(jax.jit, static_argnames=("config",))
-def _lookahead_jit(mask, poses, state, paths, lengths, vel, new_path, idx, idx_ok, enabled, transform, *,
-                   config):
+def _lookahead_jit(mask, poses, state, paths, lengths, vel, new_path, reset, idx, idx_ok, enabled, transform,
+                   *, config):
   with jax.named_scope("speed_filter_lookahead"):
     # Traced lengths outside [0, N] are a value problem: such a robot is flagged, not clipped.
     len_ok = (lengths >= 0) & (lengths <= paths.shape[1])
     idx_ok = idx_ok & mask_geometry_ok(mask)[idx]
 
-    def one(st, i, ok, pose, path, n, npth, v, en, tf):
+    def one(st, i, ok, pose, path, n, npth, v, en, tf, rs):
       new, out = speed_lookahead_one(st, *mask_leaves(mask, i), pose, path, jnp.where(ok, n, 0), npth, v,
-                                     en, tf, config=config)
+                                     en, tf, rs, config=config)
       return guard_index(new, out, st, ok)
 
-    return jax.vmap(one, in_axes=(0, 0, 0, 0, 0, 0, 0, 0, 0, None if transform is None else 0))(
-        state, idx, idx_ok & len_ok, poses, paths, lengths, new_path, vel, enabled, transform)
+    return jax.vmap(one, in_axes=(0, 0, 0, 0, 0, 0, 0, 0, 0, None if transform is None else 0,
+                                  None if reset is None else 0))(
+        state, idx, idx_ok & len_ok, poses, paths, lengths, new_path, vel, enabled, transform, reset)

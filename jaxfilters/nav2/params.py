@@ -281,7 +281,13 @@ def _filter(ld: _Loader, costmap: Node, name: str, as_layer: bool):
         _warn(f"{fw}: min_lookahead {lo} < 0 is clamped to 0 as Nav2 does")
       if hi < max(lo, 0.0):
         _warn(f"{fw}: max_lookahead {hi} < min_lookahead is raised to it as Nav2 does")
-      lookahead = LookaheadConfig(max_decel=decel, min_lookahead=lo, max_lookahead=hi)
+      # Nav2 PR #6522's parameters (docs/nav2_semantics.md §5.7); absent = Nav2 main's behaviour.
+      rewind = _float32(r, f"{name}.max_path_rewind", 0.0)
+      if rewind < 0:
+        raise Nav2ParamsError(f"{fw}: max_path_rewind {show(rewind)} is negative; expected 0 (forward-only "
+                              "start index, as Nav2 main) or the metres of path the index may move back")
+      lookahead = LookaheadConfig(max_decel=decel, min_lookahead=lo, max_lookahead=hi, max_path_rewind=rewind,
+                                  clear_path_on_reset=r.get(f"{name}.clear_path_on_reset", "bool", False))
     return cls(percentage=percentage, speed_limit_topic=join("speed_limit_topic", "speed_limit"),
                lookahead=lookahead, path_topic=join("path_topic", "plan"),
                odom_topic=r.get(f"{name}.odom_topic", "str", "odom"), **common)
