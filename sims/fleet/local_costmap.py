@@ -118,22 +118,22 @@ def local_costmaps(static_cost: jax.Array, map_origin: jax.Array, res: jax.Array
   other = ~jnp.eye(k, dtype=bool)[:, :, None, None]
   occupied = jnp.any(other & (dx * dx + dy * dy <= robot_radius * robot_radius), axis=1)
   cost = jnp.where(occupied, jnp.uint8(constants.LETHAL_OBSTACLE), static)
-  resolution = jnp.full((k,), res, _F32)
 
   def inflate_all(c):
     for layer in layers:
       if isinstance(layer, AsymmetricInflationConfig):
-        c = asymmetric_inflate(Costmap(c, origin, resolution), paths=paths, path_lengths=path_lengths,
-                               robot_xy=poses[:, :2], config=layer).cost
+        c = asymmetric_inflate(Costmap(c, origin, jnp.full((k,), res, _F32)), paths=paths,
+                               path_lengths=path_lengths, robot_xy=poses[:, :2], config=layer).cost
       else:
         c = inflate(c, config=layer)
     return c
 
   if keepout_config is None:
-    costmap = Costmap(inflate_all(cost), origin, resolution)
+    cost = inflate_all(cost)
+    costmap = Costmap(cost, origin, jnp.full((k,), res, _F32))
     return keepout_filter(costmap, keepout, poses, keepout_state, config=_KEEPOUT)
   keepout_config = dataclasses.replace(keepout_config, aligned_fast_path=False)   # as _KEEPOUT
-  primary = Costmap(cost, origin, resolution)
+  primary = Costmap(cost, origin, jnp.full((k,), res, _F32))
   bounds = jnp.concatenate([origin, origin + n * res], axis=1)     # the rolling window redraws it all
   kstate, _ = keepout_update_bounds(primary, keepout, poses, keepout_state, bounds, config=keepout_config)
   primary, kstate2 = keepout_filter(primary, keepout, poses, kstate, config=keepout_config)
