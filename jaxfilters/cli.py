@@ -323,15 +323,18 @@ def check_params_options(args) -> None:
       raise CliError(f"{option} needs --params")
 
 
-def params_costmap(args, command: str):
+def params_costmap(args, command: str, *, also: tuple[str, ...] = ()):
   """The Nav2Costmap that --params/--costmap/--mask/--set name; warnings go to stderr as one line each.
 
   Args:
     args: the namespace of a parser that `add_params_options` filled.
     command: the command's name, for the warning lines.
+    also: other costmaps to load with it (e.g. ("local_costmap",) for its
+      layers); their problems are refused alike.
 
   Returns:
-    `jaxfilters.Nav2Costmap` of the chosen costmap (at least one filter).
+    `jaxfilters.Nav2Costmap` of the chosen costmap (at least one filter), or
+    with `also` the pair (that costmap, `jaxfilters.Nav2Params` of all loaded).
 
   Raises:
     CliError: a bad pair, a params file that does not load, or no filters.
@@ -342,18 +345,21 @@ def params_costmap(args, command: str):
   name = args.costmap or "global_costmap"
   masks = name_value_pairs("--mask", args.mask)
   subs = name_value_pairs("--set", args.substitutions)
+  names = tuple(dict.fromkeys((name, *also)))
   with warnings.catch_warnings(record=True) as caught:
     warnings.simplefilter("always", nav2.Nav2ParamsWarning)
     try:
-      params = nav2.load_params(args.params, masks=masks, substitutions=subs, costmaps=(name,))
+      params = nav2.load_params(args.params, masks=masks, substitutions=subs, costmaps=names)
     except (ValueError, FileNotFoundError) as e:
       raise CliError(str(e).splitlines()[0] if str(e) else type(e).__name__) from None
   for w in caught:
     print(f"jaxfilters {command}: warning: {str(w.message).splitlines()[0]}", file=sys.stderr)
+  if getattr(params, name) is None:
+    raise CliError(f"--params {args.params}: no {name} node (expected e.g. '{name}: {name}: ros__parameters:')")
   costmap = params.costmap(name)
   if not costmap.filters:
     raise CliError(f"--params {args.params}: {name} has no costmap filters (its 'filters:' list is empty)")
-  return costmap
+  return (costmap, params) if also else costmap
 
 
 def prepare_out(out, option: str = "--out"):

@@ -3,6 +3,10 @@
 `LayeredCostmap::updateMap` with filters: the *primary* map gets the plugins
 (static layer, obstacles, inflation), is copied into the *combined* map, and
 the filters run on the combined map only. So filter output is never inflated.
+The inflation layers (`LayersConfig.layers`: InflationLayer and
+AsymmetricInflationLayer, `LayersConfig.from_nav2` takes them from a params
+file's `plugins:`) run in their `plugins:` order; an AsymmetricInflationLayer
+reads each robot's plan (`paths`, `path_lengths`) and position (the poses').
 `keepout_as_layer=True` models users who list the keepout filter under
 `plugins:` before the inflation layer (docs PR #972): it then runs on the
 primary map and its zones are inflated. With escape mode on, cells written
@@ -28,12 +32,14 @@ import jax.numpy as jnp
 import numpy as np
 
 from jaxfilters import constants
+from jaxfilters.asymmetric_inflation import AsymmetricInflationConfig, asymmetric_inflate
 from jaxfilters.inflation import InflationConfig, inflate
 from jaxfilters import validate
 from jaxfilters.keepout import KeepoutConfig, KeepoutState, keepout_filter, keepout_update_bounds
+from jaxfilters.nav2.runtime import Nav2Costmap
 from jaxfilters.speed import SpeedResult, SpeedState, speed_filter
 from jaxfilters.static_layer import StaticLayerConfig, static_layer
-from jaxfilters.types import Costmap, FilterMask, pytree_dataclass
+from jaxfilters.types import Costmap, FilterMask, check_poses, pytree_dataclass
 
 
 @dataclasses.dataclass(frozen=True)
@@ -42,14 +48,19 @@ class LayersConfig:
 
   Attributes:
     static: StaticLayerConfig for the occupancy -> cost conversion.
-    inflation: InflationConfig, or None for no inflation layer.
+    inflation: InflationConfig, or None for no inflation layer (shorthand for
+      `layers=(inflation,)`; give one of the two).
     keepout: KeepoutConfig for the keepout filter.
     keepout_as_layer: run keepout on the primary map before inflation.
+    layers: the inflation layers in `plugins:` order, each an InflationConfig
+      (`inflate`) or an AsymmetricInflationConfig (`asymmetric_inflate`, which
+      needs `paths` and `path_lengths` in `costmap_pipeline`).
   """
   static: StaticLayerConfig = StaticLayerConfig()
   inflation: InflationConfig | None = None
   keepout: KeepoutConfig = KeepoutConfig()
   keepout_as_layer: bool = False
+  layers: tuple[InflationConfig | AsymmetricInflationConfig, ...] = ()
 
   def __post_init__(self):
     if not isinstance(self.static, StaticLayerConfig):
@@ -58,6 +69,55 @@ class LayersConfig:
       raise ValueError(f"inflation must be an InflationConfig or None; got {type(self.inflation).__name__}")
     if not isinstance(self.keepout, KeepoutConfig):
       raise ValueError(f"keepout must be a KeepoutConfig; got {type(self.keepout).__name__}")
+    if not isinstance(self.layers, tuple) or not all(
+        isinstance(x, (InflationConfig, AsymmetricInflationConfig)) for x in self.layers):
+      raise ValueError("layers must be a tuple of InflationConfig / AsymmetricInflationConfig; got "
+                       f"{validate.short_repr(self.layers)}")
+    if self.inflation is not None and self.layers:
+      raise ValueError("give the inflation layers either as inflation= (one InflationConfig) or as layers= "
+                       "(in plugins: order), not both")
+
+  @property
+  def inflation_layers(self) -> tuple[InflationConfig | AsymmetricInflationConfig, ...]:
+    """The inflation layers run in order: `layers`, or `(inflation,)`, or none."""
+    return self.layers or (() if self.inflation is None else (self.inflation,))
+
+  @property
+  def needs_paths(self) -> bool:
+    """Whether an AsymmetricInflationLayer is configured (`costmap_pipeline` then needs `paths`)."""
+    return any(isinstance(x, AsymmetricInflationConfig) for x in self.layers)
+
+  @classmethod
+  def from_nav2(cls, costmap: Nav2Costmap, *, resolution: float | None = None, **kwargs) -> LayersConfig:
+    """The LayersConfig running a params file's inflation layers in its `plugins:` order.
+
+    Args:
+      costmap: a `Nav2Costmap` (`load_params(...).costmap(name)`); its `layers`
+        (InflationLayer, AsymmetricInflationLayer) become `layers`, each with its
+        parameters, the costmap's resolution and its footprint's inscribed radius.
+      resolution: metres per cell of the costmaps the pipeline gets, when it is not
+        the costmap's `resolution` parameter (a global costmap sized by its static
+        map takes the map's); None keeps each layer's.
+      **kwargs: the other LayersConfig fields (static, keepout, keepout_as_layer).
+
+    Returns:
+      The LayersConfig.
+
+    Raises:
+      TypeError: `costmap` that is not a Nav2Costmap.
+      ValueError: `inflation` or `layers` in kwargs, or a resolution the layer
+        configs reject.
+    """
+    if not isinstance(costmap, Nav2Costmap):
+      raise TypeError(f"from_nav2 takes a Nav2Costmap (load_params(...).costmap(name)); got "
+                       f"{type(costmap).__name__}")
+    for key in ("inflation", "layers"):
+      if key in kwargs:
+        raise ValueError(f"from_nav2 takes the inflation layers from the costmap; got {key}= as well")
+    layers = tuple(x.config for x in costmap.layers)
+    if resolution is not None:
+      layers = tuple(dataclasses.replace(x, resolution=resolution) for x in layers)
+    return cls(layers=layers, **kwargs)
 
 
 @pytree_dataclass
@@ -82,8 +142,8 @@ def costmap_pipeline(static_data, origin, resolution, poses, *, config: LayersCo
                      obstacles=None, keepout_mask: FilterMask | None = None,
                      keepout_state: KeepoutState | None = None, speed_mask: FilterMask | None = None,
                      speed_state: SpeedState | None = None, mask_index=None,
-                     enabled=None, new_keepout_mask=None) -> PipelineOutput:
-  """Static layer (+ obstacles) -> inflation -> filters on the combined map.
+                     enabled=None, new_keepout_mask=None, paths=None, path_lengths=None) -> PipelineOutput:
+  """Static layer (+ obstacles) -> inflation layers -> filters on the combined map.
 
   Args:
     static_data: int8 [B, H, W] occupancy under each robot's costmap.
@@ -99,15 +159,32 @@ def costmap_pipeline(static_data, origin, resolution, poses, *, config: LayersCo
     new_keepout_mask: optional bool [B] or scalar: a new keepout mask arrived
       since the last cycle (Nav2's updateBounds then grows the bounds and
       skips the robot-in-zone test this cycle).
+    paths, path_lengths: each robot's plan, float32 [B, P, 2] in world metres in
+      the costmaps' frame and int32 [B] points in use, for an
+      AsymmetricInflationLayer in `config.layers` (required then, refused
+      otherwise); the robot position it reads is `poses[:, :2]` as float32.
 
   Returns:
     PipelineOutput.
+
+  Raises:
+    ValueError: inputs that go together given alone (keepout_mask and
+      keepout_state, speed_mask and speed_state, paths and path_lengths), an
+      AsymmetricInflationLayer without paths or paths without one, and what
+      the layers and filters reject.
   """
   with jax.named_scope("costmap_pipeline"):
     if (keepout_mask is None) != (keepout_state is None):
       raise ValueError("keepout_mask and keepout_state go together; got only one of them")
     if (speed_mask is None) != (speed_state is None):
       raise ValueError("speed_mask and speed_state go together; got only one of them")
+    if (paths is None) != (path_lengths is None):
+      raise ValueError("paths and path_lengths go together; got only one of them")
+    if config.needs_paths and paths is None:
+      raise ValueError("config.layers has an AsymmetricInflationLayer, which reads each robot's plan: pass "
+                       "paths (float32 [B, P, 2], metres in the costmaps' frame) and path_lengths (int32 [B])")
+    if paths is not None and not config.needs_paths:
+      raise ValueError("paths were given but config.layers has no AsymmetricInflationLayer to read them")
     cost = static_layer(static_data, config=config.static)
     if obstacles is not None:
       obstacles = jnp.asarray(obstacles)
@@ -133,8 +210,12 @@ def costmap_pipeline(static_data, origin, resolution, poses, *, config: LayersCo
     if keepout_mask is not None and config.keepout_as_layer:
       primary, keepout_state = keepout_filter(primary, keepout_mask, poses, keepout_state,
                                               mask_index=mask_index, enabled=enabled, config=config.keepout)
-    if config.inflation is not None:
-      primary = inflate(primary, config=config.inflation)
+    for layer in config.inflation_layers:
+      if isinstance(layer, AsymmetricInflationConfig):
+        primary = asymmetric_inflate(primary, paths=paths, path_lengths=path_lengths,
+                                     robot_xy=check_poses(poses, cost.shape[0])[:, :2], config=layer)
+      else:
+        primary = inflate(primary, config=layer)
     combined = primary
     if keepout_mask is not None and not config.keepout_as_layer:
       combined, keepout_state = keepout_filter(primary, keepout_mask, poses, keepout_state,

@@ -23,6 +23,7 @@ entry-point group (pyproject.toml).
 from __future__ import annotations
 
 import argparse
+import dataclasses
 import json
 import math
 import sys
@@ -80,7 +81,9 @@ Maps, one of three sets (no option is ignored: a mix is refused):
                                              --speed-type/--speed-base/--speed-multiplier say otherwise
                                              (the defaults of `jaxfilters query --speed`)
   --map and --params                         the costmap's keepout and speed filters (both enabled),
-                                             with their type, base and multiplier
+                                             with their type, base and multiplier; the local costmaps run
+                                             the file's local_costmap InflationLayer/AsymmetricInflationLayer
+                                             (each robot with its own plan), e.g. sims/assets/nav2_params_lanes.yaml
 --seconds is rounded to whole env steps of 0.2 s (a note says so when it moves); the last chunk
 is shorter when --chunk-seconds does not divide the run.
 
@@ -381,6 +384,9 @@ def run_fleet(args) -> int:
       "speed_filter": {"type": scenario.speed_type, "base": scenario.speed_base,
                        "multiplier": scenario.speed_multiplier},
       "stations": np.asarray(w.stations).round(3).tolist(),
+      # The params' local costmap inflation layers the local costmaps ran (empty: the fleet's inflation).
+      "local_layers": [{"name": x.name, "plugin": x.plugin, **dataclasses.asdict(c)}
+                       for x, c in zip(scenario.layers, w.local_layers, strict=True)],
   }
   summary["config"] = {
       "robots": args.robots, "robots_per_world": k, "worlds": num_worlds, "seed": args.seed,

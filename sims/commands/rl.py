@@ -88,7 +88,9 @@ Maps, one of three sets (a mix is refused):
   none of --map/--keepout/--speed/--params   the built-in warehouse
   --map, --keepout and --speed               speed mask type {jcli.SPEED_TYPE_DEFAULT}, base {jcli.SPEED_BASE_DEFAULT:g}, multiplier {jcli.SPEED_MULTIPLIER_DEFAULT:g} unless
                                              --speed-type/--speed-base/--speed-multiplier say otherwise
-  --map and --params                         the costmap's keepout and speed filters (both enabled)
+  --map and --params                         the costmap's keepout and speed filters (both enabled); the
+                                             local_costmap's InflationLayer inflates the static layer (an
+                                             AsymmetricInflationLayer is refused: the env has no plan)
 
 JSON keys: episodes, success (fraction of episodes that reached a goal), goals_per_episode,
 keepout_entries and collisions (totals over all episodes), speed_excess_s (mean seconds per

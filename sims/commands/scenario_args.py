@@ -5,7 +5,8 @@ Three sets, nothing given ignored:
   none of --map/--keepout/--speed/--params   the built-in warehouse
   --map, --keepout and --speed               mask files (speed info from --speed-type/--speed-base/
                                              --speed-multiplier, the defaults of `jaxfilters query --speed`)
-  --map and --params [--mask NODE=MAP ...]   the costmap's keepout and speed filters (both enabled)
+  --map and --params [--mask NODE=MAP ...]   the costmap's keepout and speed filters (both enabled), and the
+                                             inflation layers of the file's local_costmap for the local costmaps
 
 A parser gets the options from `add_map_options`; `check_map_args` refuses a
 bad set before anything is loaded and `scenario_from_args` builds the
@@ -63,13 +64,18 @@ def check_map_args(args) -> None:
 def scenario_from_params(args, command: str, what: str = "the fleet"):
   """The Scenario of --map with --params' keepout and speed filters (both present and enabled).
 
+  The file's `local_costmap` (when it has one) gives `Scenario.layers`: the
+  InflationLayer and AsymmetricInflationLayer its `plugins:` list, which the
+  fleet's local costmaps run instead of the fleet's own inflation.
+
   Args:
     args: the namespace (checked by `check_map_args`).
     command: the command's name, for warning lines.
     what: what runs the filters, for messages ("the fleet", "the RL env").
   """
   from sims.fleet.scenario import Scenario
-  costmap = jcli.params_costmap(args, command)
+  costmap, params = jcli.params_costmap(args, command, also=("local_costmap",))
+  layers = () if params.local_costmap is None else params.local_costmap.layers
   where = f"--params {args.params}: {costmap.name}"
   for kind, f in (("keepout", costmap.keepout), ("speed", costmap.speed)):
     if f is None:
@@ -87,7 +93,8 @@ def scenario_from_params(args, command: str, what: str = "the fleet"):
   info = speed.mask.info
   base, mult = float(np.asarray(info.base).reshape(-1)[0]), float(np.asarray(info.multiplier).reshape(-1)[0])
   return Scenario.load(args.map, costmap.keepout.mask_yaml, speed.mask_yaml,
-                       speed_type=1 if speed.percentage else 2, speed_base=base, speed_multiplier=mult)
+                       speed_type=1 if speed.percentage else 2, speed_base=base, speed_multiplier=mult,
+                       layers=layers)
 
 
 def scenario_from_args(args, command: str, what: str = "the fleet"):

@@ -48,7 +48,7 @@ from jaxfilters.footprint import window_cells
 from jaxfilters.keepout import KeepoutState
 from jaxfilters.speed import SpeedState, speed_filter
 from jaxfilters.types import Costmap, pytree_dataclass
-from sims.fleet import local_costmap, metrics as metrics_lib, planner
+from sims.fleet import local_costmap, metrics as metrics_lib, navigation, planner
 from sims.fleet.config import FleetConfig
 from sims.fleet.scenario import Scenario
 from sims.fleet.world import World, WorldParams, build_world
@@ -378,13 +378,51 @@ class FleetEnv:
                                                                window=window))(xy)
 
   def _update_costmaps(self, state: WorldState) -> WorldState:
-    """Rebuilds every robot's local costmap (and the planner's table of it) at the current poses."""
+    return self.update_costmaps(state)
+
+  def robot_plans(self, state: WorldState) -> tuple[jax.Array, jax.Array]:
+    """Each robot's global plan to its goal (`navigation.trace_plan`), for an AsymmetricInflationLayer.
+
+    Args:
+      state: WorldState of one world.
+
+    Returns:
+      (float32 [K, P, 2] world metres, the map's frame = the local costmaps'; int32 [K]
+      points in use) with P = `world.plan_points`.
+
+    Raises:
+      ValueError: a world without an AsymmetricInflationLayer (P = 0: nothing reads plans).
+    """
+    w = self.world
+    if not w.plans_needed:
+      raise ValueError("robot_plans: this world's local costmaps run no AsymmetricInflationLayer "
+                       "(Scenario.layers), so no plan is traced")
+    poses = state.data.qpos[:, :2]
+    trace = functools.partial(navigation.trace_plan, self.params.nav, num_points=w.plan_points, step=w.plan_step)
+    return jax.vmap(trace)(state.goal, poses)
+
+  def update_costmaps(self, state: WorldState) -> WorldState:
+    """Rebuilds every robot's local costmap (and the planner's table of it) at the current poses.
+
+    The inflation layers are `world.local_inflation_layers`; an AsymmetricInflationLayer
+    among them reads each robot's own plan (`robot_plans`) and position.
+
+    Args:
+      state: WorldState of one world.
+
+    Returns:
+      The state with `local`, `keepout` and `plan_lut` rebuilt.
+    """
     cfg, p = self.config, self.params
     poses = state.data.qpos[:, :3]
+    paths = lengths = None
+    if self.world.plans_needed:       # static: the default fleet traces nothing
+      paths, lengths = self.robot_plans(state)
     local, kstate = local_costmap.local_costmaps(
         p.static_cost, p.map_origin, p.map_resolution, self.world.pad, p.keepout, poses,
         state.keepout, n=self.world.window_cells, robot_radius=cfg.robot.radius,
-        inflation=self.world.inflation, keepout_config=self.world.keepout_config)
+        inflation=self.world.inflation, keepout_config=self.world.keepout_config,
+        layers=self.world.local_inflation_layers, paths=paths, path_lengths=lengths)
     return dataclasses.replace(state, local=local, keepout=kstate,
                                plan_lut=jax.vmap(planner.lookup_table)(local.cost))
 

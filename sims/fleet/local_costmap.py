@@ -8,7 +8,12 @@ For each robot of a world (Nav2's local costmap, `rolling_window: true`):
 3. other robots of the world are obstacles: cells whose centre is within a
    robot radius of another robot's centre become LETHAL (what a sensor would
    mark);
-4. inflation (`jaxfilters.inflation.inflate`);
+4. inflation (`jaxfilters.inflation.inflate`), or the inflation layers of a
+   params file's local costmap in their `plugins:` order (`layers`): an
+   InflationLayer runs `inflate`, an AsymmetricInflationLayer
+   `jaxfilters.asymmetric_inflate` with each robot's own plan (`paths`, world
+   metres: the window's frame is the map's, its origin a map cell corner) and
+   position;
 5. the keepout filter (`jaxfilters.keepout.keepout_filter`) on the combined
    map *after* inflation, Nav2's filter order, so keepout cells are lethal but
    not inflated.
@@ -32,6 +37,7 @@ import jax
 import jax.numpy as jnp
 
 from jaxfilters import constants
+from jaxfilters.asymmetric_inflation import AsymmetricInflationConfig, asymmetric_inflate
 from jaxfilters.inflation import InflationConfig, inflate
 from jaxfilters.keepout import KeepoutConfig, KeepoutState, keepout_filter, keepout_update_bounds
 from jaxfilters.types import Costmap
@@ -66,7 +72,10 @@ def window_index(xy: jax.Array, map_origin: jax.Array, res: jax.Array, n: int) -
 def local_costmaps(static_cost: jax.Array, map_origin: jax.Array, res: jax.Array, pad: int,
                    keepout, poses: jax.Array, keepout_state: KeepoutState, *, n: int,
                    robot_radius: float, inflation: InflationConfig,
-                   keepout_config: KeepoutConfig | None = None) -> tuple[Costmap, KeepoutState]:
+                   keepout_config: KeepoutConfig | None = None,
+                   layers: tuple[InflationConfig | AsymmetricInflationConfig, ...] | None = None,
+                   paths: jax.Array | None = None,
+                   path_lengths: jax.Array | None = None) -> tuple[Costmap, KeepoutState]:
   """Builds the K local costmaps of one world.
 
   Args:
@@ -81,10 +90,19 @@ def local_costmaps(static_cost: jax.Array, map_origin: jax.Array, res: jax.Array
     inflation: static InflationConfig at resolution res.
     keepout_config: static KeepoutConfig with escape mode: keepout as a layer
       before inflation (see above); None: Nav2's filter after inflation.
+    layers: static inflation layers run in order instead of `inflation` (None:
+      `(inflation,)`), each at resolution res.
+    paths: float32 [K, P, 2], each robot's plan in world metres, and
+    path_lengths: int32 [K] its points in use: needed (only) by an
+      AsymmetricInflationConfig in `layers`.
 
   Returns:
     (Costmap with cost uint8 [K, n, n], origin [K, 2], resolution [K]; new KeepoutState).
   """
+  layers = (inflation,) if layers is None else tuple(layers)
+  if any(isinstance(x, AsymmetricInflationConfig) for x in layers) and (paths is None or path_lengths is None):
+    raise ValueError("local_costmaps: an AsymmetricInflationConfig in layers reads each robot's plan; pass "
+                     "paths float32 [K, P, 2] and path_lengths int32 [K]")
   k = poses.shape[0]
   hp, wp = static_cost.shape
   idx = window_index(poses[:, :2], map_origin, res, n)
@@ -100,8 +118,18 @@ def local_costmaps(static_cost: jax.Array, map_origin: jax.Array, res: jax.Array
   other = ~jnp.eye(k, dtype=bool)[:, :, None, None]
   occupied = jnp.any(other & (dx * dx + dy * dy <= robot_radius * robot_radius), axis=1)
   cost = jnp.where(occupied, jnp.uint8(constants.LETHAL_OBSTACLE), static)
+
+  def inflate_all(c):
+    for layer in layers:
+      if isinstance(layer, AsymmetricInflationConfig):
+        c = asymmetric_inflate(Costmap(c, origin, jnp.full((k,), res, _F32)), paths=paths,
+                               path_lengths=path_lengths, robot_xy=poses[:, :2], config=layer).cost
+      else:
+        c = inflate(c, config=layer)
+    return c
+
   if keepout_config is None:
-    cost = inflate(cost, config=inflation)
+    cost = inflate_all(cost)
     costmap = Costmap(cost, origin, jnp.full((k,), res, _F32))
     return keepout_filter(costmap, keepout, poses, keepout_state, config=_KEEPOUT)
   keepout_config = dataclasses.replace(keepout_config, aligned_fast_path=False)   # as _KEEPOUT
@@ -110,4 +138,4 @@ def local_costmaps(static_cost: jax.Array, map_origin: jax.Array, res: jax.Array
   kstate, _ = keepout_update_bounds(primary, keepout, poses, keepout_state, bounds, config=keepout_config)
   primary, kstate2 = keepout_filter(primary, keepout, poses, kstate, config=keepout_config)
   kstate2 = dataclasses.replace(kstate2, error=kstate2.error | kstate.error)
-  return dataclasses.replace(primary, cost=inflate(primary.cost, config=inflation)), kstate2
+  return dataclasses.replace(primary, cost=inflate_all(primary.cost)), kstate2

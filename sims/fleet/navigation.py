@@ -356,3 +356,48 @@ def value_and_direction_xy(field: NavField, goal: jax.Array, x: jax.Array, y: ja
   n = jnp.sqrt(gx * gx + gy * gy)
   safe = jnp.where(n > 1e-9, n, 1.0)
   return v0, jnp.where(n > 1e-9, gx / safe, 0.0), jnp.where(n > 1e-9, gy / safe, 0.0)
+
+
+def trace_plan(field: NavField, goal: jax.Array, xy: jax.Array, *, num_points: int,
+               step: float) -> tuple[jax.Array, jax.Array]:
+  """One robot's global plan: the descent of its goal's field from xy, as a polyline.
+
+  The fleet has no path planner of its own: a robot descends the navigation
+  function (`value_and_direction`), whose descent is the shortest weighted path
+  to the goal. This traces it the way Nav2's planner publishes a plan (world
+  metres, first point the robot's position): from xy, one `step` along the
+  descent direction per point, until the goal is within one step (the station
+  is then the last point), the field gives no direction (flat or unreachable),
+  or `num_points` points are used. A longer path is cut there: its last point
+  stands in for the goal (AsymmetricInflationLayer's `goal_distance_threshold`
+  reads the last point).
+
+  Args:
+    field: the shared NavField.
+    goal: int32 [], station index (< S).
+    xy: float32 [2], the robot position (m).
+    num_points: P >= 1, the most points (static).
+    step: metres between points (static, > 0).
+
+  Returns:
+    (float32 [P, 2] points in world metres, int32 [] points in use in [1, P]);
+    points past the length repeat the last one.
+  """
+  if num_points < 1 or not step > 0:
+    raise ValueError(f"trace_plan needs num_points >= 1 and step > 0; got {num_points}, {step}")
+  xy = jnp.asarray(xy, _F32)
+  station = field.stations[goal]
+
+  def body(carry, _):
+    p, n, done = carry
+    v, d = value_and_direction(field, goal, p)
+    moves = (v < UNREACHABLE) & jnp.any(d != 0.0)
+    arrive = v <= step
+    go = ~done & (moves | arrive)
+    nxt = jnp.where(arrive, station, p + jnp.float32(step) * d)
+    p = jnp.where(go, nxt, p)
+    return (p, n + go.astype(jnp.int32), done | ~go | arrive), p
+
+  init = (xy, jnp.ones((), jnp.int32), jnp.zeros((), bool))
+  (_, n, _), rest = jax.lax.scan(body, init, None, length=num_points - 1)
+  return jnp.concatenate([xy[None], rest], axis=0), n

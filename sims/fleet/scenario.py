@@ -9,6 +9,11 @@ map YAMLs, e.g. Nav2's own warehouse:
 Filter info follows Nav2's bringup (`nav2_params.yaml`): keepout type 0 with
 base 0 and multiplier 1; speed type 1 (percent) with base 100 and multiplier
 -1, so a mask value d limits speed to 100 - d percent.
+
+A Scenario built from a Nav2 params file (`jaxfilters fleet --params`) also
+carries the inflation layers its local costmap lists under `plugins:`
+(`Scenario.layers`); the fleet's local costmaps then run them
+(sims/fleet/world.py `local_layers`).
 """
 
 from __future__ import annotations
@@ -22,6 +27,7 @@ import numpy as np
 from jaxfilters import constants
 from jaxfilters.grid import OccupancyGrid
 from jaxfilters.map_io import load_map
+from jaxfilters.nav2 import Nav2InflationLayer
 
 ASSETS = Path(__file__).resolve().parents[1] / "assets"
 DEFAULT_FILES = tuple(ASSETS / f"default_{n}.yaml" for n in ("map", "keepout", "speed"))
@@ -38,6 +44,9 @@ class Scenario:
     speed: the speed mask.
     speed_type: 1 (percent of max speed) or 2 (absolute m/s).
     speed_base, speed_multiplier: limit = d * multiplier + base (float32 in Nav2).
+    layers: the local costmap's inflation layers from a params file, in its
+      `plugins:` order (`Nav2Costmap.layers`); empty: the fleet's own inflation
+      (FleetConfig.inflation_radius, cost_scaling_factor, the robot's footprint).
   """
   name: str
   map: OccupancyGrid
@@ -46,8 +55,12 @@ class Scenario:
   speed_type: int = constants.SPEED_FILTER_PERCENT
   speed_base: float = 100.0
   speed_multiplier: float = -1.0
+  layers: tuple[Nav2InflationLayer, ...] = ()
 
   def __post_init__(self):
+    if not isinstance(self.layers, tuple) or not all(isinstance(x, Nav2InflationLayer) for x in self.layers):
+      raise ValueError("Scenario.layers must be a tuple of Nav2InflationLayer (Nav2Costmap.layers); got "
+                       f"{type(self.layers).__name__}")
     for field in ("map", "keepout", "speed"):
       if not isinstance(getattr(self, field), OccupancyGrid):
         raise ValueError(f"Scenario.{field} must be an OccupancyGrid; got {type(getattr(self, field)).__name__}")
@@ -61,7 +74,7 @@ class Scenario:
   def load(cls, map_yaml: str | os.PathLike, keepout_yaml: str | os.PathLike,
            speed_yaml: str | os.PathLike, *, speed_type: int = constants.SPEED_FILTER_PERCENT,
            speed_base: float = 100.0, speed_multiplier: float = -1.0,
-           name: str | None = None) -> "Scenario":
+           name: str | None = None, layers: tuple[Nav2InflationLayer, ...] = ()) -> "Scenario":
     """Loads three Nav2 map YAMLs with `jaxfilters.map_io.load_map`.
 
     Args:
@@ -71,6 +84,7 @@ class Scenario:
       speed_base, speed_multiplier: limit = d * multiplier + base (Nav2's
         CostmapFilterInfo; the defaults are Nav2 bringup's).
       name: label for reports (default: the map YAML's stem).
+      layers: the local costmap's inflation layers (see the class).
 
     Returns:
       The Scenario.
@@ -81,7 +95,7 @@ class Scenario:
     """
     return cls(name=name or Path(map_yaml).stem, map=load_map(map_yaml), keepout=load_map(keepout_yaml),
                speed=load_map(speed_yaml), speed_type=int(speed_type), speed_base=float(speed_base),
-               speed_multiplier=float(speed_multiplier))
+               speed_multiplier=float(speed_multiplier), layers=tuple(layers))
 
   @classmethod
   def default(cls) -> "Scenario":

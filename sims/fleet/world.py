@@ -34,6 +34,7 @@ import jax.numpy as jnp
 import numpy as np
 
 from jaxfilters import constants
+from jaxfilters.asymmetric_inflation import AsymmetricInflationConfig
 from jaxfilters.footprint import band_clearance, footprint_in_zone_one, window_cells
 from jaxfilters.inflation import InflationConfig, inflate
 from jaxfilters.keepout import KeepoutConfig, KeepoutState, keepout_filter
@@ -105,6 +106,10 @@ class World:
     keepout_config: the local costmaps' KeepoutConfig with keepout escape
       (None: the filter after inflation, as Nav2 places filters).
     zone_spawns: float [Q, 2] (see WorldParams).
+    local_layers: the local costmaps' inflation layers from the scenario's params
+      (`local_layers`); empty: `(inflation,)`.
+    plan_points: P, the points of each robot's plan (`navigation.trace_plan`,
+      one per navigation cell) when an AsymmetricInflationLayer is configured; 0 otherwise.
   """
   scenario: Scenario
   config: FleetConfig
@@ -121,6 +126,23 @@ class World:
   spawns: np.ndarray
   keepout_config: KeepoutConfig | None = None
   zone_spawns: np.ndarray = dataclasses.field(default_factory=lambda: np.zeros((0, 2), np.float32))
+  local_layers: tuple[InflationConfig | AsymmetricInflationConfig, ...] = ()
+  plan_points: int = 0
+
+  @property
+  def local_inflation_layers(self) -> tuple[InflationConfig | AsymmetricInflationConfig, ...]:
+    """The inflation layers the local costmaps run, in order: `local_layers`, else `(inflation,)`."""
+    return self.local_layers or (self.inflation,)
+
+  @property
+  def plans_needed(self) -> bool:
+    """Whether the local costmaps run an AsymmetricInflationLayer (each robot's plan is then traced)."""
+    return any(isinstance(x, AsymmetricInflationConfig) for x in self.local_layers)
+
+  @property
+  def plan_step(self) -> float:
+    """Metres between the points of a robot's plan: one navigation cell."""
+    return self.nav_factor * float(self.scenario.map.resolution)
 
   @property
   def num_zones(self) -> int:
@@ -163,6 +185,44 @@ def inflation_config(resolution: float, config: FleetConfig) -> InflationConfig:
     return infl
   return dataclasses.replace(infl, inscribed_radius=max(infl.inscribed_radius,
                                                         keepout_inscribed_radius(resolution, config)))
+
+
+def local_layers(scenario: Scenario, resolution: float, config: FleetConfig
+                 ) -> tuple[InflationConfig | AsymmetricInflationConfig, ...]:
+  """The local costmaps' inflation layers from the scenario's params (`Scenario.layers`), in order.
+
+  Each layer's config as the params file gives it (its parameters, the footprint's
+  inscribed radius), at the map's resolution: the local costmap is a window of the
+  static map.
+
+  Args:
+    scenario: the maps, with the params' local costmap layers (empty: none).
+    resolution: the static map's metres per cell.
+    config: the fleet config.
+
+  Returns:
+    The configs, empty when the scenario has no layers.
+
+  Raises:
+    ValueError: a layer whose resolution (the params' local costmap `resolution`,
+      Nav2's default 0.1 when unset) is not the map's, or layers with keepout
+      escape (which sets the local inflation's inscribed radius itself).
+  """
+  if not scenario.layers:
+    return ()
+  if config.keepout_escape != "off":
+    raise ValueError("keepout escape (FleetConfig.keepout_escape) raises the local inflation's inscribed radius "
+                     "itself; it does not run with a params file's local costmap inflation layers "
+                     f"({', '.join(x.name for x in scenario.layers)})")
+  out = []
+  for layer in scenario.layers:
+    if np.float32(layer.config.resolution) != np.float32(resolution):
+      raise ValueError(f"the local costmap's layer '{layer.name}' is at resolution {layer.config.resolution} m "
+                       f"(the params' local_costmap resolution; Nav2's default 0.1 when unset) but the fleet's "
+                       f"local costmap is a window of the map at {resolution} m: set local_costmap "
+                       f"resolution: {resolution}")
+    out.append(dataclasses.replace(layer.config, resolution=resolution))
+  return tuple(out)
 
 
 def local_keepout_config(resolution: float, config: FleetConfig, infl: InflationConfig) -> KeepoutConfig | None:
@@ -325,6 +385,7 @@ def build_world(scenario: Scenario, config: FleetConfig, *, seed: int = 0) -> Wo
       raise ValueError(f"the {name} mask resolution ({mask.resolution}) must equal the map "
                        f"resolution ({res}): the planner samples masks at half-cell spacing")
   infl = inflation_config(res, config)
+  layers = local_layers(scenario, res, config)
   keepout = FilterMask.create(scenario.keepout, FilterInfo.create(constants.KEEPOUT_FILTER))
   speed = FilterMask.create(scenario.speed, FilterInfo.create(
       scenario.speed_type, scenario.speed_base, scenario.speed_multiplier))
@@ -429,7 +490,19 @@ def build_world(scenario: Scenario, config: FleetConfig, *, seed: int = 0) -> Wo
   return World(scenario=scenario, config=config, params=params, global_cost=cost, inflation=infl,
                window_cells=n, pad=pad, nav_factor=factor, zone_labels=labels,
                zone_limits=raw_limits, zone_speed=speeds, stations=stations, spawns=spawns,
-               keepout_config=keepout_cfg, zone_spawns=np.asarray(zone_spawns, np.float32).reshape(-1, 2))
+               keepout_config=keepout_cfg, zone_spawns=np.asarray(zone_spawns, np.float32).reshape(-1, 2),
+               local_layers=layers, plan_points=_plan_points(layers, config, nav_res))
+
+
+def _plan_points(layers, config: FleetConfig, step: float) -> int:
+  """P: plan points covering the window's corner plus the widest asymmetric layer's radius, one per
+  navigation cell (0 without an asymmetric layer). Nav2 culls the segments farther from the window
+  than the radius; a plan that leaves that reach and comes back is cut (`navigation.trace_plan`)."""
+  radii = [x.inflation_radius for x in layers if isinstance(x, AsymmetricInflationConfig)]
+  if not radii:
+    return 0
+  reach = config.local_costmap_size * math.sqrt(0.5) + max(radii)
+  return math.ceil(reach / step) + 2
 
 
 def _zone_spawns(grid, keepout: FilterMask, walls: np.ndarray, exit_dist: np.ndarray, factor: int,

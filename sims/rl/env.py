@@ -29,8 +29,9 @@ Two modes (`NavEnvConfig.mode`):
 
 Observation (velocity mode), per robot, concatenated over K (float32 [K * 98]):
 a `crop_cells` x `crop_cells` crop of the cost around the robot in its own
-frame (max of the inflated static layer and `jaxfilters.query.keepout_cost_at`,
-/ 255, 81 values by default), the speed limit in force (cap / max_speed,
+frame (max of the inflated static layer, inflated by a params file's local costmap
+InflationLayer (`Scenario.layers`) or else the fleet's inflation, and
+`jaxfilters.query.keepout_cost_at`, / 255, 81 values by default), the speed limit in force (cap / max_speed,
 limited flag), the limit at 3 points ahead, the goal in the robot frame (dx, dy
 / 5 m, distance / 10 m, clipped), the navigation field's descent direction
 (robot frame) and distance / 20 m, the velocity (commanded v, w and measured
@@ -83,6 +84,7 @@ except ImportError as e:  # pragma: no cover - exercised only without the extra
                     f"(playground==0.2.0; {e})") from None
 
 from jaxfilters import constants
+from jaxfilters.asymmetric_inflation import AsymmetricInflationConfig
 from jaxfilters.inflation import inflate
 from jaxfilters.speed import SpeedState, speed_filter
 from jaxfilters.static_layer import static_layer
@@ -205,6 +207,22 @@ def nav_model(model: mjx.Model, task: NavTask) -> NavModel:
 # ----------------------------------------------------------------------------- env
 
 
+def check_layers(scenario: Scenario) -> None:
+  """Refuses a scenario whose params list an AsymmetricInflationLayer (`Scenario.layers`).
+
+  The env's inflated static layer, which observations and collisions read, is built
+  once for every robot, so no robot's plan can shape it.
+
+  Raises:
+    ValueError: naming the layer.
+  """
+  asym = [x.name for x in scenario.layers if isinstance(x.config, AsymmetricInflationConfig)]
+  if asym:
+    raise ValueError(f"NavEnv: the RL env has no plan for AsymmetricInflationLayer '{asym[0]}' (its inflated "
+                     "static layer, which observations and collisions read, is built once for every robot); "
+                     "remove it from the params' local_costmap plugins, or run it with `jaxfilters fleet`")
+
+
 class NavEnv(mjx_env.MjxEnv):
   """The fleet world as a Playground `MjxEnv` (see the module docstring).
 
@@ -227,8 +245,12 @@ class NavEnv(mjx_env.MjxEnv):
       raise ValueError("NavEnv: zone layouts (layouts > 1) need velocity mode; navigation mode drives the "
                        "fleet on the scenario's own zones")
     self._layout_worlds = tuple(layout_worlds)
-    static = static_layer(jnp.asarray(w.scenario.map.data)[None], config=STATIC_LAYER)
-    inflated = np.asarray(inflate(static, config=w.inflation)[0])
+    check_layers(w.scenario)
+    # The local costmap's inflation layers (a params file's InflationLayer, else the fleet's inflation).
+    inflated = static_layer(jnp.asarray(w.scenario.map.data)[None], config=STATIC_LAYER)
+    for layer in w.local_inflation_layers:
+      inflated = inflate(inflated, config=layer)
+    inflated = np.asarray(inflated[0])
     task = NavTask(world=w.params, static_inflated=jnp.asarray(inflated),
                    # Every station of every layout may be a goal: an env draws only among its own layout's.
                    goal_logits=jnp.zeros((bank.nav.stations.shape[0],), _F32),
@@ -255,8 +277,9 @@ class NavEnv(mjx_env.MjxEnv):
       layout_config: how random layouts are drawn.
 
     Raises:
-      ValueError: a bad config or scenario (see FleetEnv.create, build_world), layouts < 1, or
-        layouts > 1 in navigation mode.
+      ValueError: a bad config or scenario (see FleetEnv.create, build_world), layouts < 1,
+        layouts > 1 in navigation mode, or a scenario with an AsymmetricInflationLayer
+        (`check_layers`).
       TypeError: config of the wrong type.
     """
     if not isinstance(config, NavEnvConfig):
@@ -268,6 +291,8 @@ class NavEnv(mjx_env.MjxEnv):
       raise ValueError(f"layouts must be an integer >= 1; got {layouts!r}")
     if layouts > MAX_LAYOUTS:
       raise ValueError(f"layouts must be at most {MAX_LAYOUTS} (each is a world built on the host); got {layouts!r}")
+    if scenario is not None:
+      check_layers(scenario)          # before the world is built
     fleet = FleetEnv.create(scenario, fleet_config, seed=seed)
     if layouts == 1:
       return cls(fleet, config)
