@@ -384,7 +384,8 @@ class FleetEnv:
     local, kstate = local_costmap.local_costmaps(
         p.static_cost, p.map_origin, p.map_resolution, self.world.pad, p.keepout, poses,
         state.keepout, n=self.world.window_cells, robot_radius=cfg.robot.radius,
-        inflation=self.world.inflation, keepout_config=self.world.keepout_config)
+        inflation=self.world.inflation, keepout_config=self.world.keepout_config,
+        direction=p.direction if cfg.honour_lanes else None)
     return dataclasses.replace(state, local=local, keepout=kstate,
                                plan_lut=jax.vmap(planner.lookup_table)(local.cost))
 
@@ -474,6 +475,9 @@ class FleetEnv:
       kin = jax.vmap(lambda q: metrics_lib.in_keepout(p.keepout, q))(xy)
       m, in_k = metrics_lib.physics_update(m, in_k, xy, jnp.linalg.norm(xy - xy0, axis=-1), speed,
                                            zone, kin, cfg.physics_dt)
+      if p.direction is not None:       # one-way lanes (static: no work without a direction mask)
+        m = metrics_lib.wrong_way_update(m, jax.vmap(lambda q, u: metrics_lib.wrong_way(p.direction, q, u))(
+            xy, data.qvel[:, :2]))
       if self.keepout_escape:
         t = t0 + (j + 1).astype(_F32) * jnp.float32(cfg.physics_dt)
         m = metrics_lib.footprint_update(m, self._footprint_in_keepout(xy), t)

@@ -38,6 +38,11 @@ class Scenario:
     speed: the speed mask.
     speed_type: 1 (percent of max speed) or 2 (absolute m/s).
     speed_base, speed_multiplier: limit = d * multiplier + base (float32 in Nav2).
+    direction: optional one-way-lane mask (`jaxfilters.direction`, FilterInfo
+      type 5; load it with `jaxfilters.map_io.load_map`, mode raw); None (the
+      default): no lanes, and the fleet does no direction work at all.
+    direction_base, direction_multiplier: lane direction in degrees = d *
+      multiplier + base (defaults: d = 1 east, 19 north, 37 west, 55 south).
   """
   name: str
   map: OccupancyGrid
@@ -46,6 +51,9 @@ class Scenario:
   speed_type: int = constants.SPEED_FILTER_PERCENT
   speed_base: float = 100.0
   speed_multiplier: float = -1.0
+  direction: OccupancyGrid | None = None
+  direction_base: float = -5.0
+  direction_multiplier: float = 5.0
 
   def __post_init__(self):
     for field in ("map", "keepout", "speed"):
@@ -53,7 +61,9 @@ class Scenario:
         raise ValueError(f"Scenario.{field} must be an OccupancyGrid; got {type(getattr(self, field)).__name__}")
     if self.speed_type not in (constants.SPEED_FILTER_PERCENT, constants.SPEED_FILTER_ABSOLUTE):
       raise ValueError(f"Scenario.speed_type must be 1 (percent) or 2 (absolute m/s); got {self.speed_type!r}")
-    for name in ("speed_base", "speed_multiplier"):
+    if self.direction is not None and not isinstance(self.direction, OccupancyGrid):
+      raise ValueError(f"Scenario.direction must be an OccupancyGrid or None; got {type(self.direction).__name__}")
+    for name in ("speed_base", "speed_multiplier", "direction_base", "direction_multiplier"):
       if not np.isfinite(float(getattr(self, name))):
         raise ValueError(f"Scenario.{name} must be finite; got {getattr(self, name)!r}")
 

@@ -1,0 +1,109 @@
+"""One-way lanes in the MJX fleet: with a direction mask no robot drives against the lane; without it one does.
+
+A small map of two rooms joined by a 1 m corridor that is one-way eastbound.
+Robot 0 starts in the west room heading for the east station, robot 1 in the
+east room heading for the west station. With the lanes only measured
+(FleetConfig.honour_lanes False, the same scenario and mask) robot 1 drives
+west through the corridor and the metrics count wrong-way traversals (> 0:
+the test can fail); honoured, the corridor is lethal in robot 1's costmap
+while it faces west, so it never enters, and robot 0 still drives through.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+import pytest
+
+import jaxfilters as jf
+from jaxfilters import constants
+from sims.fleet.config import FleetConfig
+from sims.fleet.env import FleetEnv
+from sims.fleet.metrics import summarize
+from sims.fleet.scenario import Scenario
+
+RES = 0.1
+EAST = 1                 # Scenario's default encoding: d = 1 is 0 degrees (east)
+CFG = FleetConfig(robots_per_world=2, num_stations=2)
+STEPS = 60               # 12 s
+CORRIDOR = (3.0, 5.0, 1.5, 2.5)   # x0, x1, y0, y1 (m)
+
+
+def _scenario(lanes: bool) -> Scenario:
+  h, w = 40, 80                                    # 4 m x 8 m
+  occ = np.full((h, w), constants.OCC_GRID_OCCUPIED, np.int8)
+  occ[1:-1, 1:30] = 0                              # west room x in [0.1, 3.0)
+  occ[1:-1, 50:-1] = 0                             # east room x in [5.0, 7.9)
+  x0, x1, y0, y1 = (round(v / RES) for v in CORRIDOR)
+  occ[y0:y1, x0:x1] = 0
+  grid = lambda d: jf.OccupancyGrid.create(d, RES, (0.0, 0.0, 0.0))
+  lanes_data = np.zeros((h, w), np.int8)
+  lanes_data[y0:y1, x0 - 2:x1 + 2] = EAST           # the corridor and its two mouths
+  return Scenario(name="corridor", map=grid(occ), keepout=grid(np.zeros((h, w), np.int8)),
+                  speed=grid(np.zeros((h, w), np.int8)), direction=grid(lanes_data) if lanes else None)
+
+
+def _run(honour: bool):
+  env = FleetEnv.create(_scenario(True), dataclasses.replace(CFG, honour_lanes=honour), seed=0)
+  stations = np.asarray(env.params.nav.stations)
+  west, east = int(np.argmin(stations[:, 0])), int(np.argmax(stations[:, 0]))
+  assert stations[west, 0] < CORRIDOR[0] and stations[east, 0] > CORRIDOR[1], stations
+  s = env.reset_fn()(env.params, env.world_keys(jax.random.PRNGKey(0), 1))
+  qpos = jnp.asarray([[[1.5, 2.0, 0.0], [6.5, 2.0, np.pi]]], jnp.float32)
+  s = dataclasses.replace(s, data=s.data.replace(qpos=qpos), goal=jnp.asarray([[east, west]], jnp.int32),
+                          progress_anchor=qpos[..., :2])
+  s, frames = env.rollout_fn(STEPS)(env.params, s)
+  return env, s, np.asarray(frames.pose)
+
+
+@pytest.fixture(scope="module")
+def with_lanes():
+  return _run(True)
+
+
+@pytest.fixture(scope="module")
+def without_lanes():
+  return _run(False)
+
+
+def _summary(env, s):
+  w = env.world
+  return summarize(s.metrics, zone_labels=w.zone_labels, zone_limits=w.zone_limits, zone_speed=w.zone_speed,
+                   speed_tolerance=CFG.speed_tolerance, seconds=STEPS * CFG.step_seconds)
+
+
+def _in_corridor(pose):
+  x0, x1, y0, y1 = CORRIDOR
+  return (pose[..., 0] > x0) & (pose[..., 0] < x1) & (pose[..., 1] > y0) & (pose[..., 1] < y1)
+
+
+def test_lanes_only_measured_a_robot_drives_against_the_lane(without_lanes):
+  env, s, pose = without_lanes
+  f = _summary(env, s)
+  assert f["fleet"]["wrong_way_entries"] > 0 and f["fleet"]["wrong_way_steps"] > 0
+  assert f["robots"][1]["wrong_way_entries"] > 0
+  # Robot 1 drove into the corridor westbound (the recorded 5 Hz poses; it meets robot 0 there).
+  inside = _in_corridor(pose[:, 0, 1])
+  assert inside.any() and np.cos(pose[inside, 0, 1, 2]).min() < -0.9, pose[:, 0, 1]
+
+
+def test_lanes_honoured_no_robot_drives_against_the_lane(with_lanes):
+  env, s, pose = with_lanes
+  f = _summary(env, s)
+  assert f["fleet"]["wrong_way_entries"] == 0 and f["fleet"]["wrong_way_steps"] == 0, f["robots"]
+  # Robot 1 (westbound) never entered the corridor; robot 0 drove through it eastbound.
+  assert not _in_corridor(pose[:, 0, 1]).any()
+  assert pose[:, 0, 0, 0].max() > CORRIDOR[1], pose[:, 0, 0, 0]
+  assert f["fleet"]["contacts"] == 0
+
+
+def test_no_direction_mask_no_direction_work():
+  """The default path: no direction mask, no lane leaves in the params and the same metrics as before (zeros)."""
+  scenario = dataclasses.replace(_scenario(True), direction=None)
+  env = FleetEnv.create(scenario, CFG, seed=0)
+  assert env.params.direction is None
+  s = env.reset_fn()(env.params, env.world_keys(jax.random.PRNGKey(0), 1))
+  assert int(s.metrics.wrong_way_entries.sum()) == 0
