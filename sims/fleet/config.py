@@ -179,6 +179,8 @@ class FleetConfig:
       True makes every lane cell a robot's heading is not allowed on lethal in
       its local costmap; False only measures wrong-way driving (the baseline
       the lanes are compared with). Without a direction mask it changes nothing.
+      Carried as data (WorldParams.honour_lanes), so both settings run one
+      compiled program.
   """
   robots_per_world: int = 8
   robot: RobotConfig = RobotConfig()

@@ -385,7 +385,7 @@ class FleetEnv:
         p.static_cost, p.map_origin, p.map_resolution, self.world.pad, p.keepout, poses,
         state.keepout, n=self.world.window_cells, robot_radius=cfg.robot.radius,
         inflation=self.world.inflation, keepout_config=self.world.keepout_config,
-        direction=p.direction if cfg.honour_lanes else None)
+        direction=p.direction, honour_lanes=p.honour_lanes)
     return dataclasses.replace(state, local=local, keepout=kstate,
                                plan_lut=jax.vmap(planner.lookup_table)(local.cost))
 

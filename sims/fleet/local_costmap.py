@@ -75,7 +75,8 @@ def window_index(xy: jax.Array, map_origin: jax.Array, res: jax.Array, n: int) -
 def local_costmaps(static_cost: jax.Array, map_origin: jax.Array, res: jax.Array, pad: int,
                    keepout, poses: jax.Array, keepout_state: KeepoutState, *, n: int,
                    robot_radius: float, inflation: InflationConfig,
-                   keepout_config: KeepoutConfig | None = None, direction=None) -> tuple[Costmap, KeepoutState]:
+                   keepout_config: KeepoutConfig | None = None, direction=None,
+                   honour_lanes=None) -> tuple[Costmap, KeepoutState]:
   """Builds the K local costmaps of one world.
 
   Args:
@@ -92,6 +93,8 @@ def local_costmaps(static_cost: jax.Array, map_origin: jax.Array, res: jax.Array
       before inflation (see above); None: Nav2's filter after inflation.
     direction: FilterMask of type 5 (one-way lanes) or None (static: no
       direction work at all).
+    honour_lanes: bool [] with a direction mask: False leaves the costmaps
+      as they are (FleetConfig.honour_lanes; None means True).
 
   Returns:
     (Costmap with cost uint8 [K, n, n], origin [K, 2], resolution [K]; new KeepoutState).
@@ -115,21 +118,22 @@ def local_costmaps(static_cost: jax.Array, map_origin: jax.Array, res: jax.Array
     cost = inflate(cost, config=inflation)
     costmap = Costmap(cost, origin, jnp.full((k,), res, _F32))
     costmap, kstate = keepout_filter(costmap, keepout, poses, keepout_state, config=_KEEPOUT)
-    return _lanes(costmap, direction, poses), kstate
+    return _lanes(costmap, direction, poses, honour_lanes), kstate
   keepout_config = dataclasses.replace(keepout_config, aligned_fast_path=False)   # as _KEEPOUT
   primary = Costmap(cost, origin, jnp.full((k,), res, _F32))
   bounds = jnp.concatenate([origin, origin + n * res], axis=1)     # the rolling window redraws it all
   kstate, _ = keepout_update_bounds(primary, keepout, poses, keepout_state, bounds, config=keepout_config)
   primary, kstate2 = keepout_filter(primary, keepout, poses, kstate, config=keepout_config)
   kstate2 = dataclasses.replace(kstate2, error=kstate2.error | kstate.error)
-  return _lanes(dataclasses.replace(primary, cost=inflate(primary.cost, config=inflation)), direction, poses), kstate2
+  primary = dataclasses.replace(primary, cost=inflate(primary.cost, config=inflation))
+  return _lanes(primary, direction, poses, honour_lanes), kstate2
 
 
-def _lanes(costmap: Costmap, direction, poses: jax.Array) -> Costmap:
+def _lanes(costmap: Costmap, direction, poses: jax.Array, honour) -> Costmap:
   """The direction filter on the K costmaps at the robots' headings, the robot's own cell kept (see above)."""
   if direction is None:
     return costmap
-  out, _ = direction_filter(costmap, direction, poses)
+  out, _ = direction_filter(costmap, direction, poses, enabled=None if honour is None else honour)
   k, n, _ = costmap.cost.shape
   cell = jnp.floor((poses[:, :2] - costmap.origin) / costmap.resolution[:, None]).astype(jnp.int32)
   inside = jnp.all((cell >= 0) & (cell < n), axis=1)

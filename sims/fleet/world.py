@@ -74,6 +74,9 @@ class WorldParams:
       inscribed band, with a way out (Q = 0 unless robots_in_keepout > 0).
     direction: FilterMask (M = 1) of type 5, the one-way lanes
       (`jaxfilters.direction`), or None (Scenario.direction None: no lanes).
+    honour_lanes: bool [] (FleetConfig.honour_lanes) with a direction mask,
+      else None: data, not a static option, so the honoured run and its
+      measured baseline run one compiled program.
   """
   static_cost: jax.Array
   map_origin: jax.Array
@@ -87,6 +90,7 @@ class WorldParams:
   spawns: jax.Array
   zone_spawns: jax.Array
   direction: FilterMask | None = None
+  honour_lanes: jax.Array | None = None
 
 
 @dataclasses.dataclass(frozen=True, eq=False)
@@ -431,7 +435,8 @@ def build_world(scenario: Scenario, config: FleetConfig, *, seed: int = 0) -> Wo
       spawns=jnp.asarray(spawns), zone_spawns=jnp.asarray(zone_spawns, jnp.float32).reshape(-1, 2),
       direction=None if scenario.direction is None else FilterMask.create(
           scenario.direction, FilterInfo.create(constants.DIRECTION_FILTER, scenario.direction_base,
-                                                scenario.direction_multiplier)))
+                                                scenario.direction_multiplier)),
+      honour_lanes=None if scenario.direction is None else jnp.asarray(config.honour_lanes))
   return World(scenario=scenario, config=config, params=params, global_cost=cost, inflation=infl,
                window_cells=n, pad=pad, nav_factor=factor, zone_labels=labels,
                zone_limits=raw_limits, zone_speed=speeds, stations=stations, spawns=spawns,
