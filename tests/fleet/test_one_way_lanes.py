@@ -20,6 +20,8 @@ import pytest
 
 import jaxfilters as jf
 from jaxfilters import constants
+from jaxfilters.keepout import KeepoutState
+from sims.fleet import local_costmap
 from sims.fleet.config import FleetConfig
 from sims.fleet.env import FleetEnv
 from sims.fleet.metrics import summarize
@@ -107,3 +109,29 @@ def test_no_direction_mask_no_direction_work():
   assert env.params.direction is None
   s = env.reset_fn()(env.params, env.world_keys(jax.random.PRNGKey(0), 1))
   assert int(s.metrics.wrong_way_entries.sum()) == 0
+
+
+def test_local_costmaps_block_the_lane_against_the_heading_but_not_the_robots_own_cell(with_lanes):
+  """A robot that turned against the lane inside it: the lane around it is lethal, its own cell is not
+  (it can turn back); the same robot facing along the lane sees the lane open; honour_lanes False: untouched."""
+  env, _, _ = with_lanes
+  p, w = env.params, env.world
+  poses = jnp.asarray([[4.0, 2.0, np.pi], [4.0, 2.0, 0.0]], jnp.float32)      # mid-corridor: west, east
+
+  @jax.jit
+  def build(honour):
+    local, _ = local_costmap.local_costmaps(
+        p.static_cost, p.map_origin, p.map_resolution, w.pad, p.keepout, poses, KeepoutState.create(2),
+        n=w.window_cells, robot_radius=0.01, inflation=w.inflation, direction=p.direction, honour_lanes=honour)
+    return local
+
+  local, plain = build(jnp.asarray(True)), build(jnp.asarray(False))
+  cost, base = np.asarray(local.cost), np.asarray(plain.cost)
+  origin = np.asarray(local.origin)
+  col, row = (np.floor((np.asarray(poses)[:, :2] - origin) / RES).astype(int)).T
+  lane = (slice(row[0] - 3, row[0] + 4), slice(col[0] - 5, col[0] + 6))       # corridor cells around robot 0
+  assert cost[0, row[0], col[0]] == base[0, row[0], col[0]] < constants.LETHAL_OBSTACLE   # its own cell
+  assert cost[0, row[0], col[0] + 1] == cost[0, row[0], col[0] - 1] == constants.LETHAL_OBSTACLE
+  assert (cost[0][lane] == constants.LETHAL_OBSTACLE).sum() == (cost[0][lane] >= 0).sum() - 1
+  np.testing.assert_array_equal(cost[1], base[1])                               # facing along the lane
+  assert (base[0][lane] < constants.LETHAL_OBSTACLE).all()
