@@ -10,7 +10,8 @@ One `step` is one local-costmap period (1 / costmap_hz, 0.2 s by default):
 
 1. apply the action (goal overrides; -1 keeps the current goal);
 2. rebuild every robot's rolling local costmap (static layer, other robots,
-   inflation, keepout filter; sims/fleet/local_costmap.py);
+   inflation, keepout filter, and with a direction mask the one-way lanes at
+   each robot's heading; sims/fleet/local_costmap.py);
 3. `lax.scan` over controller ticks (controller_hz, 20 Hz), each:
    pose from MJX -> speed filter (its state carried) -> goals and progress
    checker -> local planner on the local costmap, descending the shared
