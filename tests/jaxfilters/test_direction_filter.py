@@ -12,6 +12,7 @@ import pytest
 import jaxfilters as jf
 from jaxfilters import constants
 from jaxfilters.direction import lane_direction
+from tests.compile_count import count_compiles
 
 BASE, MULT = -5.0, 5.0           # d = 1 east, 19 north, 37 west, 55 south (5 degree steps)
 EAST, NORTH, WEST, SOUTH = 1, 19, 37, 55
@@ -171,10 +172,10 @@ def test_jit_and_eager_agree_and_a_second_call_compiles_nothing():
   jitted = jax.jit(lambda c, m, p: jf.direction_filter(c, m, p))(cm, mask, jnp.asarray(poses))
   for a, b in zip(jax.tree.leaves(eager), jax.tree.leaves(jitted)):
     np.testing.assert_array_equal(np.asarray(a), np.asarray(b))
-  from jaxfilters import direction
-  before = direction._direction_jit._cache_size()
-  jf.direction_filter(cm, mask, poses + np.float32(0.1))
-  assert direction._direction_jit._cache_size() == before
+  with count_compiles() as compiles:
+    jf.direction_filter(cm, mask, poses + np.float32(0.1))
+    jf.direction_filter(cm, mask.with_data(np.asarray(data)[::-1]), poses)
+  assert compiles() == 0
 
 
 @pytest.mark.parametrize("kwargs, match", [
