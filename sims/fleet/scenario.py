@@ -71,7 +71,8 @@ class Scenario:
   def load(cls, map_yaml: str | os.PathLike, keepout_yaml: str | os.PathLike,
            speed_yaml: str | os.PathLike, *, speed_type: int = constants.SPEED_FILTER_PERCENT,
            speed_base: float = 100.0, speed_multiplier: float = -1.0,
-           name: str | None = None) -> "Scenario":
+           name: str | None = None, direction_yaml: str | os.PathLike | None = None,
+           direction_base: float = -5.0, direction_multiplier: float = 5.0) -> "Scenario":
     """Loads three Nav2 map YAMLs with `jaxfilters.map_io.load_map`.
 
     Args:
@@ -81,6 +82,10 @@ class Scenario:
       speed_base, speed_multiplier: limit = d * multiplier + base (Nav2's
         CostmapFilterInfo; the defaults are Nav2 bringup's).
       name: label for reports (default: the map YAML's stem).
+      direction_yaml: optional map_server YAML of a one-way-lane mask
+        (`jaxfilters.direction`; `mode: raw`, so a pixel byte is the cell value).
+      direction_base, direction_multiplier: lane direction in degrees =
+        d * multiplier + base (see the class).
 
     Returns:
       The Scenario.
@@ -91,7 +96,9 @@ class Scenario:
     """
     return cls(name=name or Path(map_yaml).stem, map=load_map(map_yaml), keepout=load_map(keepout_yaml),
                speed=load_map(speed_yaml), speed_type=int(speed_type), speed_base=float(speed_base),
-               speed_multiplier=float(speed_multiplier))
+               speed_multiplier=float(speed_multiplier),
+               direction=None if direction_yaml is None else load_map(direction_yaml),
+               direction_base=float(direction_base), direction_multiplier=float(direction_multiplier))
 
   @classmethod
   def default(cls) -> "Scenario":

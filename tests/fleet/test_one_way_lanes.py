@@ -135,3 +135,23 @@ def test_local_costmaps_block_the_lane_against_the_heading_but_not_the_robots_ow
   assert (cost[0][lane] == constants.LETHAL_OBSTACLE).sum() == (cost[0][lane] >= 0).sum() - 1
   np.testing.assert_array_equal(cost[1], base[1])                               # facing along the lane
   assert (base[0][lane] < constants.LETHAL_OBSTACLE).all()
+
+
+def test_scenario_load_reads_a_lane_mask_from_map_server_files(tmp_path):
+  """Scenario.load with direction_yaml: the lane bytes of a raw-mode PGM arrive as the mask's cell values."""
+  sc = _scenario(True)
+  for name in ("map", "keepout", "speed"):
+    jf.save_map(getattr(sc, name), tmp_path / f"{name}.yaml")
+  lanes = np.asarray(sc.direction.data)
+  h, w = lanes.shape
+  (tmp_path / "lanes.pgm").write_bytes(b"P5\n%d %d\n255\n" % (w, h) + lanes[::-1].astype(np.uint8).tobytes())
+  (tmp_path / "lanes.yaml").write_text(f"image: lanes.pgm\nmode: raw\nresolution: {RES}\norigin: [0.0, 0.0, 0.0]\n"
+                                       "negate: 0\noccupied_thresh: 0.65\nfree_thresh: 0.196\n")
+  loaded = Scenario.load(*(tmp_path / f"{n}.yaml" for n in ("map", "keepout", "speed")),
+                         direction_yaml=tmp_path / "lanes.yaml")
+  np.testing.assert_array_equal(loaded.direction.data, lanes)
+  assert (loaded.direction_base, loaded.direction_multiplier) == (-5.0, 5.0)
+  assert Scenario.load(*(tmp_path / f"{n}.yaml" for n in ("map", "keepout", "speed"))).direction is None
+  with pytest.raises(ValueError, match="direction_base must be finite"):
+    Scenario.load(*(tmp_path / f"{n}.yaml" for n in ("map", "keepout", "speed")),
+                  direction_yaml=tmp_path / "lanes.yaml", direction_base=float("nan"))
