@@ -10,6 +10,7 @@ from jaxfilters._version import __version__
 from jaxfilters.asymmetric_inflation import (AsymmetricInflationConfig, asymmetric_inflate,
                                              asymmetric_inflate_zones)
 from jaxfilters.binary import BinaryResult, BinaryState, binary_filter
+from jaxfilters.direction import DirectionConfig, DirectionResult, direction_filter
 from jaxfilters.geometry import world_to_cell
 from jaxfilters.grid import OccupancyGrid
 from jaxfilters.inflation import InflationConfig, footprint_radii, inflate
@@ -33,7 +34,8 @@ from jaxfilters.types import Costmap, FilterInfo, FilterMask
 from jaxfilters.zone import ZoneResult, ZoneState, ZoneTable, zone_filter
 
 __all__ = [
-    "__version__", "AsymmetricInflationConfig", "BinaryResult", "BinaryState", "Circle", "Costmap", "FilterInfo", "FilterMask",
+    "__version__", "AsymmetricInflationConfig", "BinaryResult", "BinaryState", "Circle", "Costmap", "DirectionConfig",
+    "DirectionResult", "FilterInfo", "FilterMask",
     "InflationConfig", "KeepoutConfig", "KeepoutState", "LayersConfig", "LookaheadConfig",
     "MAX_MAP_CELLS", "MapMetadata", "Nav2BinaryFilter", "Nav2Costmap", "Nav2Filter",
     "Nav2InflationLayer", "Nav2KeepoutFilter", "Nav2Params", "Nav2ParamsError", "Nav2ParamsWarning", "Nav2Readout",
@@ -41,7 +43,7 @@ __all__ = [
     "RasterResult", "Shapes", "SpeedResult", "SpeedState", "StaticLayerConfig", "ZoneResult",
     "ZoneSetpoint", "ZoneState", "ZoneStateConfig", "ZoneTable", "asymmetric_inflate", "asymmetric_inflate_zones",
     "binary_at", "binary_filter",
-    "constants", "costmap_pipeline", "footprint_radii", "inflate", "jaus", "keepout_cost_at",
+    "constants", "costmap_pipeline", "direction_filter", "footprint_radii", "inflate", "jaus", "keepout_cost_at",
     "keepout_filter", "keepout_update_bounds", "load_map", "load_map_image",
     "load_map_with_metadata", "load_params", "occ_to_cost", "rasterize", "rasterize_mask", "ros",
     "save_map", "signed_distance", "soft_keepout_cost", "soft_speed_limit", "speed_filter",

@@ -21,8 +21,11 @@ SPEED_FILTER_PERCENT = 1
 SPEED_FILTER_ABSOLUTE = 2
 BINARY_FILTER = 3
 ZONE_PARAMETER_FILTER = 4
+# Not a Nav2 type: this project's direction (one-way lane) filter takes the next free code
+# (docs/nav2_semantics.md §13, jaxfilters/direction.py).
+DIRECTION_FILTER = 5
 FILTER_TYPES = (KEEPOUT_FILTER, SPEED_FILTER_PERCENT, SPEED_FILTER_ABSOLUTE,
-                BINARY_FILTER, ZONE_PARAMETER_FILTER)
+                BINARY_FILTER, ZONE_PARAMETER_FILTER, DIRECTION_FILTER)
 
 BASE_DEFAULT = 0.0
 MULTIPLIER_DEFAULT = 1.0

@@ -364,7 +364,7 @@ def filter_info_from_msg(msg: dict) -> tuple[FilterInfo, str]:
   document's name, docs/nav2_semantics.md §8), not both.
 
   Raises:
-    ValueError: a missing or mistyped field, a type outside 0..4, a base or
+    ValueError: a missing or mistyped field, a type outside 0..5, a base or
       multiplier that is not finite in float32, an empty topic.
   """
   w = "CostmapFilterInfo"
@@ -377,7 +377,7 @@ def filter_info_from_msg(msg: dict) -> tuple[FilterInfo, str]:
   typ = _int(_field(msg, "type", w), f"{w}.type", 0, 255)
   if typ not in constants.FILTER_TYPES:
     raise ValueError(f"{w}.type must be one of {constants.FILTER_TYPES} (0 keepout, 1 speed %, "
-                     f"2 speed m/s, 3 binary, 4 zone); got {typ}")
+                     f"2 speed m/s, 3 binary, 4 zone, 5 direction); got {typ}")
   base = _f32(_field(msg, "base", w), f"{w}.base")
   multiplier = _f32(_field(msg, "multiplier", w), f"{w}.multiplier")
   return FilterInfo.create(typ, base, multiplier), topic

@@ -44,7 +44,8 @@ class FilterInfo:
 
   Attributes:
     type: int32, Nav2's type code (0 keepout, 1 speed %, 2 speed m/s,
-      3 binary, 4 zone parameter).
+      3 binary, 4 zone parameter), or 5 direction (one-way lanes,
+      `jaxfilters.direction`; not a Nav2 type).
     base: float32 (the message field is float32; 0.1 arrives as 0.10000000149).
     multiplier: float32.
   """
@@ -70,7 +71,7 @@ class FilterInfo:
       type_ok = False
     if not type_ok:
       raise ValueError(f"FilterInfo type must be one of {constants.FILTER_TYPES} "
-                       f"(0 keepout, 1 speed %, 2 speed m/s, 3 binary, 4 zone); got {short_repr(type)}")
+                       f"(0 keepout, 1 speed %, 2 speed m/s, 3 binary, 4 zone, 5 direction); got {short_repr(type)}")
     b32 = validate.float32_values(base, "base", owner="FilterInfo.create")
     m32 = validate.float32_values(multiplier, "multiplier", owner="FilterInfo.create")
     if b32.shape != () or m32.shape != ():

@@ -175,6 +175,12 @@ class FleetConfig:
     robots_in_keepout: robots per world that start with their footprint on a
       lethal keepout cell (spawn points from WorldParams.zone_spawns); the
       rest start on clear cells.
+    honour_lanes: with a direction mask (Scenario.direction, one-way lanes):
+      True makes every lane cell a robot's heading is not allowed on lethal in
+      its local costmap; False only measures wrong-way driving (the baseline
+      the lanes are compared with). Without a direction mask it changes nothing.
+      Carried as data (WorldParams.honour_lanes), so both settings run one
+      compiled program.
   """
   robots_per_world: int = 8
   robot: RobotConfig = RobotConfig()
@@ -195,6 +201,7 @@ class FleetConfig:
   impl: str = "jax"
   keepout_escape: str = "off"
   robots_in_keepout: int = 0
+  honour_lanes: bool = True
 
   def __post_init__(self):
     o = "FleetConfig"
@@ -210,6 +217,8 @@ class FleetConfig:
       object.__setattr__(self, name, _positive(o, name, getattr(self, name)))
     for name in ("near_miss_margin", "speed_tolerance"):
       object.__setattr__(self, name, _positive(o, name, getattr(self, name), allow_zero=True))
+    if not isinstance(self.honour_lanes, bool):
+      raise ValueError(f"{o}.honour_lanes must be a bool; got {self.honour_lanes!r}")
     if not isinstance(self.limit_angular, bool):
       raise ValueError(f"{o}.limit_angular must be a bool; got {self.limit_angular!r}")
     if self.impl not in IMPLS:

@@ -10,7 +10,8 @@ One `step` is one local-costmap period (1 / costmap_hz, 0.2 s by default):
 
 1. apply the action (goal overrides; -1 keeps the current goal);
 2. rebuild every robot's rolling local costmap (static layer, other robots,
-   inflation, keepout filter; sims/fleet/local_costmap.py);
+   inflation, keepout filter, and with a direction mask the one-way lanes at
+   each robot's heading; sims/fleet/local_costmap.py);
 3. `lax.scan` over controller ticks (controller_hz, 20 Hz), each:
    pose from MJX -> speed filter (its state carried) -> goals and progress
    checker -> local planner on the local costmap, descending the shared
@@ -422,7 +423,8 @@ class FleetEnv:
         p.static_cost, p.map_origin, p.map_resolution, self.world.pad, p.keepout, poses,
         state.keepout, n=self.world.window_cells, robot_radius=cfg.robot.radius,
         inflation=self.world.inflation, keepout_config=self.world.keepout_config,
-        layers=self.world.local_inflation_layers, paths=paths, path_lengths=lengths)
+        layers=self.world.local_inflation_layers, paths=paths, path_lengths=lengths,
+        direction=p.direction, honour_lanes=p.honour_lanes)
     return dataclasses.replace(state, local=local, keepout=kstate,
                                plan_lut=jax.vmap(planner.lookup_table)(local.cost))
 
@@ -512,6 +514,9 @@ class FleetEnv:
       kin = jax.vmap(lambda q: metrics_lib.in_keepout(p.keepout, q))(xy)
       m, in_k = metrics_lib.physics_update(m, in_k, xy, jnp.linalg.norm(xy - xy0, axis=-1), speed,
                                            zone, kin, cfg.physics_dt)
+      if p.direction is not None:       # one-way lanes (static: no work without a direction mask)
+        m = metrics_lib.wrong_way_update(m, jax.vmap(lambda q, u: metrics_lib.wrong_way(p.direction, q, u))(
+            xy, data.qvel[:, :2]))
       if self.keepout_escape:
         t = t0 + (j + 1).astype(_F32) * jnp.float32(cfg.physics_dt)
         m = metrics_lib.footprint_update(m, self._footprint_in_keepout(xy), t)

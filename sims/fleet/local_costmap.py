@@ -25,6 +25,14 @@ mode's robot-in-zone test at each robot's pose, its process() writes the zones
 (`lethal_override_cost` while escaping, which inflation does not spread), and
 inflation then gives the zones an inscribed band.
 
+With a direction mask (one-way lanes, Scenario.direction) the direction filter
+(`jaxfilters.direction.direction_filter`) runs last, after inflation like
+Nav2's filters: every lane cell the robot's heading is not allowed on becomes
+lethal in that robot's costmap, except the cell under the robot itself (it is
+there already; left lethal, a robot that turned against a lane could not even
+turn back, as a robot in a keepout zone could not leave without Nav2's escape
+mode).
+
 The work per robot is O(N^2 (R + K)) for an N x N window, independent of the
 map size, so a GPU can run tens of thousands of robots.
 """
@@ -38,6 +46,7 @@ import jax.numpy as jnp
 
 from jaxfilters import constants
 from jaxfilters.asymmetric_inflation import AsymmetricInflationConfig, asymmetric_inflate
+from jaxfilters.direction import direction_filter
 from jaxfilters.inflation import InflationConfig, inflate
 from jaxfilters.keepout import KeepoutConfig, KeepoutState, keepout_filter, keepout_update_bounds
 from jaxfilters.types import Costmap
@@ -75,7 +84,8 @@ def local_costmaps(static_cost: jax.Array, map_origin: jax.Array, res: jax.Array
                    keepout_config: KeepoutConfig | None = None,
                    layers: tuple[InflationConfig | AsymmetricInflationConfig, ...] | None = None,
                    paths: jax.Array | None = None,
-                   path_lengths: jax.Array | None = None) -> tuple[Costmap, KeepoutState]:
+                   path_lengths: jax.Array | None = None, direction=None,
+                   honour_lanes=None) -> tuple[Costmap, KeepoutState]:
   """Builds the K local costmaps of one world.
 
   Args:
@@ -95,6 +105,10 @@ def local_costmaps(static_cost: jax.Array, map_origin: jax.Array, res: jax.Array
     paths: float32 [K, P, 2], each robot's plan in world metres, and
     path_lengths: int32 [K] its points in use: needed (only) by an
       AsymmetricInflationConfig in `layers`.
+    direction: FilterMask of type 5 (one-way lanes) or None (static: no
+      direction work at all).
+    honour_lanes: bool [] with a direction mask: False leaves the costmaps
+      as they are (FleetConfig.honour_lanes; None means True).
 
   Returns:
     (Costmap with cost uint8 [K, n, n], origin [K, 2], resolution [K]; new KeepoutState).
@@ -131,11 +145,27 @@ def local_costmaps(static_cost: jax.Array, map_origin: jax.Array, res: jax.Array
   if keepout_config is None:
     cost = inflate_all(cost)
     costmap = Costmap(cost, origin, jnp.full((k,), res, _F32))
-    return keepout_filter(costmap, keepout, poses, keepout_state, config=_KEEPOUT)
+    costmap, kstate = keepout_filter(costmap, keepout, poses, keepout_state, config=_KEEPOUT)
+    return _lanes(costmap, direction, poses, honour_lanes), kstate
   keepout_config = dataclasses.replace(keepout_config, aligned_fast_path=False)   # as _KEEPOUT
   primary = Costmap(cost, origin, jnp.full((k,), res, _F32))
   bounds = jnp.concatenate([origin, origin + n * res], axis=1)     # the rolling window redraws it all
   kstate, _ = keepout_update_bounds(primary, keepout, poses, keepout_state, bounds, config=keepout_config)
   primary, kstate2 = keepout_filter(primary, keepout, poses, kstate, config=keepout_config)
   kstate2 = dataclasses.replace(kstate2, error=kstate2.error | kstate.error)
-  return dataclasses.replace(primary, cost=inflate_all(primary.cost)), kstate2
+  primary = dataclasses.replace(primary, cost=inflate_all(primary.cost))
+  return _lanes(primary, direction, poses, honour_lanes), kstate2
+
+
+def _lanes(costmap: Costmap, direction, poses: jax.Array, honour) -> Costmap:
+  """The direction filter on the K costmaps at the robots' headings, the robot's own cell kept (see above)."""
+  if direction is None:
+    return costmap
+  out, _ = direction_filter(costmap, direction, poses, enabled=None if honour is None else honour)
+  k, n, _ = costmap.cost.shape
+  cell = jnp.floor((poses[:, :2] - costmap.origin) / costmap.resolution[:, None]).astype(jnp.int32)
+  inside = jnp.all((cell >= 0) & (cell < n), axis=1)
+  col, row = jnp.clip(cell[:, 0], 0, n - 1), jnp.clip(cell[:, 1], 0, n - 1)
+  robots = jnp.arange(k)
+  own = jnp.where(inside, costmap.cost[robots, row, col], out.cost[robots, row, col])
+  return dataclasses.replace(out, cost=out.cost.at[robots, row, col].set(own))

@@ -16,7 +16,12 @@ Per robot (leading axis K inside one world, [W, K] over worlds):
   2 * radius) and near misses (closer than 2 * radius + near_miss_margin),
   counted as events (rising edges) per robot, and the smallest separation;
 * stuck events: the progress checker (0.5 m in 10 s) failed;
-* emergency stops: ticks where every planner candidate was rejected.
+* emergency stops: ticks where every planner candidate was rejected;
+* with a direction mask (one-way lanes, Scenario.direction): physics steps
+  driven the wrong way along a lane (the robot centre's mask cell holds a
+  direction and the velocity direction is outside its sector,
+  `jaxfilters.direction`; slower than `WRONG_WAY_MIN_SPEED` is not driving)
+  and wrong-way traversals (rising edges of that).
 
 The per-step kernels are written for one world ([K] leaves); `summarize`
 turns the final [W, K] metrics into plain Python for summary.json.
@@ -31,11 +36,14 @@ import jax.numpy as jnp
 import numpy as np
 
 from jaxfilters import geometry
+from jaxfilters.direction import DirectionConfig, wrong_way_cells
 from jaxfilters.footprint import footprint_in_zone_one
 from jaxfilters.keepout import pose_in_lethal_zone_one
+from jaxfilters.mask_lookup import mask_cell, mask_leaves
 from jaxfilters.types import FilterMask, pytree_dataclass
 
 _F32 = jnp.float32
+WRONG_WAY_MIN_SPEED = 0.05   # m/s: slower is turning or standing, not driving along a lane
 
 
 @pytree_dataclass
@@ -61,7 +69,11 @@ class Metrics:
       on a zone (-1 never).
     footprint_now: bool [K], the footprint is on a zone at the last physics step.
     started_in_keepout: bool [K], the footprint was on a zone at reset.
-    (The footprint fields stay at their initial values without keepout escape.)
+    wrong_way_steps: int32 [K], physics steps driven against a one-way lane.
+    wrong_way_entries: int32 [K], wrong-way traversals (rising edges of a wrong-way step).
+    wrong_way_now: bool [K], the last physics step was a wrong-way step.
+    (The footprint fields stay at their initial values without keepout escape,
+    the wrong-way ones without a direction mask.)
   """
   distance: jax.Array
   goals_reached: jax.Array
@@ -79,6 +91,9 @@ class Metrics:
   footprint_last_time: jax.Array
   footprint_now: jax.Array
   started_in_keepout: jax.Array
+  wrong_way_steps: jax.Array
+  wrong_way_entries: jax.Array
+  wrong_way_now: jax.Array
 
   @classmethod
   def zeros(cls, num_robots: int, num_zones: int) -> "Metrics":
@@ -100,7 +115,8 @@ class Metrics:
                contacts=i, near_misses=i, min_separation=jnp.full((k,), jnp.inf, _F32),
                stuck_events=i, emergency_stops=i, footprint_steps=i, footprint_entries=i,
                footprint_last_time=jnp.full((k,), -1.0, _F32), footprint_now=jnp.zeros((k,), bool),
-               started_in_keepout=jnp.zeros((k,), bool))
+               started_in_keepout=jnp.zeros((k,), bool), wrong_way_steps=i, wrong_way_entries=i,
+               wrong_way_now=jnp.zeros((k,), bool))
 
 
 def zone_at(speed_mask: FilterMask, zone_table: jax.Array, xy: jax.Array) -> jax.Array:
@@ -153,6 +169,31 @@ def footprint_in_keepout(keepout_mask: FilterMask, xy: jax.Array, *, radius: flo
   return footprint_in_zone_one(keepout_mask.data[0], keepout_mask.origin[0], keepout_mask.resolution[0],
                                jnp.stack([xy[0], xy[1], jnp.float32(0.0)]), radius=radius, window=window,
                                mask_origin_lo=lo)
+
+
+def wrong_way(direction_mask: FilterMask, xy: jax.Array, velocity: jax.Array) -> jax.Array:
+  """Whether a robot is driving against its cell's lane (`jaxfilters.direction`'s rule, default sector).
+
+  Args:
+    direction_mask: FilterMask (M = 1) of type 5.
+    xy: float32 [2] robot centre (m) in the mask frame; velocity: float32 [2] (m/s).
+
+  Returns:
+    bool []; False off the mask, on a cell without a direction, or slower than
+    WRONG_WAY_MIN_SPEED.
+  """
+  data, origin, res, info = mask_leaves(direction_mask, 0)
+  d, inside = mask_cell(data, origin, res, xy)
+  heading = jnp.arctan2(velocity[1], velocity[0])
+  wrong, _, _ = wrong_way_cells(d, info, heading, jnp.asarray(DirectionConfig().half_width, _F32))
+  return inside & wrong & (jnp.hypot(velocity[0], velocity[1]) > WRONG_WAY_MIN_SPEED)
+
+
+def wrong_way_update(m: Metrics, now: jax.Array) -> Metrics:
+  """Accumulates one physics step of the wrong-way metrics for K robots (now bool [K])."""
+  return dataclasses.replace(
+      m, wrong_way_steps=m.wrong_way_steps + now.astype(jnp.int32),
+      wrong_way_entries=m.wrong_way_entries + (now & ~m.wrong_way_now).astype(jnp.int32), wrong_way_now=now)
 
 
 def footprint_update(m: Metrics, now: jax.Array, t: jax.Array) -> Metrics:
@@ -273,6 +314,8 @@ def summarize(metrics: Metrics, *, zone_labels, zone_limits, zone_speed, speed_t
       "stuck_events": int(m.stuck_events.sum()),
       "robots_stuck": int((m.stuck_events > 0).sum()),
       "emergency_stops": int(m.emergency_stops.sum()),
+      "wrong_way_steps": int(m.wrong_way_steps.sum()),
+      "wrong_way_entries": int(m.wrong_way_entries.sum()),
       "speed_tolerance_mps": float(speed_tolerance),
       "speed_compliant": all(zn["compliant"] for zn in zones),
       "zones": zones,
@@ -317,6 +360,7 @@ def summarize(metrics: Metrics, *, zone_labels, zone_limits, zone_speed, speed_t
         "min_separation_m": float(m.min_separation[i]) if np.isfinite(m.min_separation[i]) else None,
         "stuck_events": int(m.stuck_events[i]),
         "emergency_stops": int(m.emergency_stops[i]),
+        "wrong_way_entries": int(m.wrong_way_entries[i]),
         "started_in_keepout": bool(started[i]),
         "footprint_entries": int(m.footprint_entries[i]) if footprint else None,
         "escape_time_s": float(m.footprint_last_time[i]) if footprint and escaped[i] else None,

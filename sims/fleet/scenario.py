@@ -47,6 +47,11 @@ class Scenario:
     layers: the local costmap's inflation layers from a params file, in its
       `plugins:` order (`Nav2Costmap.layers`); empty: the fleet's own inflation
       (FleetConfig.inflation_radius, cost_scaling_factor, the robot's footprint).
+    direction: optional one-way-lane mask (`jaxfilters.direction`, FilterInfo
+      type 5; load it with `jaxfilters.map_io.load_map`, mode raw); None (the
+      default): no lanes, and the fleet does no direction work at all.
+    direction_base, direction_multiplier: lane direction in degrees = d *
+      multiplier + base (defaults: d = 1 east, 19 north, 37 west, 55 south).
   """
   name: str
   map: OccupancyGrid
@@ -56,6 +61,9 @@ class Scenario:
   speed_base: float = 100.0
   speed_multiplier: float = -1.0
   layers: tuple[Nav2InflationLayer, ...] = ()
+  direction: OccupancyGrid | None = None
+  direction_base: float = -5.0
+  direction_multiplier: float = 5.0
 
   def __post_init__(self):
     if not isinstance(self.layers, tuple) or not all(isinstance(x, Nav2InflationLayer) for x in self.layers):
@@ -66,7 +74,9 @@ class Scenario:
         raise ValueError(f"Scenario.{field} must be an OccupancyGrid; got {type(getattr(self, field)).__name__}")
     if self.speed_type not in (constants.SPEED_FILTER_PERCENT, constants.SPEED_FILTER_ABSOLUTE):
       raise ValueError(f"Scenario.speed_type must be 1 (percent) or 2 (absolute m/s); got {self.speed_type!r}")
-    for name in ("speed_base", "speed_multiplier"):
+    if self.direction is not None and not isinstance(self.direction, OccupancyGrid):
+      raise ValueError(f"Scenario.direction must be an OccupancyGrid or None; got {type(self.direction).__name__}")
+    for name in ("speed_base", "speed_multiplier", "direction_base", "direction_multiplier"):
       if not np.isfinite(float(getattr(self, name))):
         raise ValueError(f"Scenario.{name} must be finite; got {getattr(self, name)!r}")
 
@@ -74,7 +84,9 @@ class Scenario:
   def load(cls, map_yaml: str | os.PathLike, keepout_yaml: str | os.PathLike,
            speed_yaml: str | os.PathLike, *, speed_type: int = constants.SPEED_FILTER_PERCENT,
            speed_base: float = 100.0, speed_multiplier: float = -1.0,
-           name: str | None = None, layers: tuple[Nav2InflationLayer, ...] = ()) -> "Scenario":
+           name: str | None = None, layers: tuple[Nav2InflationLayer, ...] = (),
+           direction_yaml: str | os.PathLike | None = None,
+           direction_base: float = -5.0, direction_multiplier: float = 5.0) -> "Scenario":
     """Loads three Nav2 map YAMLs with `jaxfilters.map_io.load_map`.
 
     Args:
@@ -85,6 +97,10 @@ class Scenario:
         CostmapFilterInfo; the defaults are Nav2 bringup's).
       name: label for reports (default: the map YAML's stem).
       layers: the local costmap's inflation layers (see the class).
+      direction_yaml: optional map_server YAML of a one-way-lane mask
+        (`jaxfilters.direction`; `mode: raw`, so a pixel byte is the cell value).
+      direction_base, direction_multiplier: lane direction in degrees =
+        d * multiplier + base (see the class).
 
     Returns:
       The Scenario.
@@ -95,7 +111,9 @@ class Scenario:
     """
     return cls(name=name or Path(map_yaml).stem, map=load_map(map_yaml), keepout=load_map(keepout_yaml),
                speed=load_map(speed_yaml), speed_type=int(speed_type), speed_base=float(speed_base),
-               speed_multiplier=float(speed_multiplier), layers=tuple(layers))
+               speed_multiplier=float(speed_multiplier), layers=tuple(layers),
+               direction=None if direction_yaml is None else load_map(direction_yaml),
+               direction_base=float(direction_base), direction_multiplier=float(direction_multiplier))
 
   @classmethod
   def default(cls) -> "Scenario":

@@ -73,6 +73,11 @@ class WorldParams:
     zone_spawns: float32 [Q, 2], spawn points whose footprint (a disc of the
       robot radius) covers a lethal keepout cell, clear of the walls'
       inscribed band, with a way out (Q = 0 unless robots_in_keepout > 0).
+    direction: FilterMask (M = 1) of type 5, the one-way lanes
+      (`jaxfilters.direction`), or None (Scenario.direction None: no lanes).
+    honour_lanes: bool [] (FleetConfig.honour_lanes) with a direction mask,
+      else None: data, not a static option, so the honoured run and its
+      measured baseline run one compiled program.
   """
   static_cost: jax.Array
   map_origin: jax.Array
@@ -85,6 +90,8 @@ class WorldParams:
   nav: navigation.NavField
   spawns: jax.Array
   zone_spawns: jax.Array
+  direction: FilterMask | None = None
+  honour_lanes: jax.Array | None = None
 
 
 @dataclasses.dataclass(frozen=True, eq=False)
@@ -486,7 +493,11 @@ def build_world(scenario: Scenario, config: FleetConfig, *, seed: int = 0) -> Wo
       nav=navigation.NavField(dist=dist, origin=jnp.asarray(np.float32([ox, oy])),
                               resolution=jnp.asarray(np.float32(nav_res)),
                               stations=jnp.asarray(stations)),
-      spawns=jnp.asarray(spawns), zone_spawns=jnp.asarray(zone_spawns, jnp.float32).reshape(-1, 2))
+      spawns=jnp.asarray(spawns), zone_spawns=jnp.asarray(zone_spawns, jnp.float32).reshape(-1, 2),
+      direction=None if scenario.direction is None else FilterMask.create(
+          scenario.direction, FilterInfo.create(constants.DIRECTION_FILTER, scenario.direction_base,
+                                                scenario.direction_multiplier)),
+      honour_lanes=None if scenario.direction is None else jnp.asarray(config.honour_lanes))
   return World(scenario=scenario, config=config, params=params, global_cost=cost, inflation=infl,
                window_cells=n, pad=pad, nav_factor=factor, zone_labels=labels,
                zone_limits=raw_limits, zone_speed=speeds, stations=stations, spawns=spawns,

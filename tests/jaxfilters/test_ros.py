@@ -136,7 +136,7 @@ def test_filter_info_both_ways_and_naming():
 
 
 @pytest.mark.parametrize("edit, match", [
-    (lambda m: m.update(type=5), r"type must be one of \(0, 1, 2, 3, 4\)"),
+    (lambda m: m.update(type=6), r"type must be one of \(0, 1, 2, 3, 4, 5\)"),
     (lambda m: m.update(type=-1), r"type must lie in \[0, 255\]"),
     (lambda m: m.update(base=float("inf")), r"base must be finite"),
     (lambda m: m.update(multiplier=1e39), r"multiplier must fit float32"),
