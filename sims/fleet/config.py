@@ -89,6 +89,13 @@ class PlannerConfig:
       (right-hand passing), which breaks symmetric robot-robot deadlocks.
     recovery_duration: s.
     reverse_speed: m/s, the backing-up speed candidates use (recovery mode only).
+    cost_weight: score per unit of the mean cost along the rollout / 252 (the
+      rollout points' costs, lethal and inscribed counted as 0 since they
+      are rules, not costs): a gradient critic like MPPI's CostCritic, so a
+      robot inside a band of raised costs (an AsymmetricInflationLayer's
+      disfavoured side) moves toward its low side. 0 (the default) leaves it out
+      of the program; the highest cost along the rollout stays in
+      `clearance_weight`.
     keep_right_weight: score against left turns while another robot is ahead
       within 2 m (right-hand traffic, so robots meeting head-on both veer right).
     inscribed_is_collision: a rollout point on an inscribed (253) cell collides
@@ -113,6 +120,7 @@ class PlannerConfig:
   reverse_speed: float = 0.15
   keep_right_weight: float = 0.3
   inscribed_is_collision: bool = False
+  cost_weight: float = 0.0
 
   def __post_init__(self):
     if not isinstance(self.inscribed_is_collision, bool):
@@ -122,7 +130,7 @@ class PlannerConfig:
     for name in ("horizon", "rollout_dt", "goal_tolerance", "recovery_after", "recovery_duration"):
       object.__setattr__(self, name, _positive("PlannerConfig", name, getattr(self, name)))
     for name in ("progress_weight", "heading_weight", "clearance_weight", "speed_weight",
-                 "monitor_margin", "reverse_speed", "keep_right_weight"):
+                 "monitor_margin", "reverse_speed", "keep_right_weight", "cost_weight"):
       object.__setattr__(self, name, _positive("PlannerConfig", name, getattr(self, name), allow_zero=True))
     _ratio("PlannerConfig", "horizon", self.horizon, "rollout_dt", self.rollout_dt)
 

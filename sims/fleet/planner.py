@@ -261,6 +261,7 @@ def one_pass_terms(lut, origin, res, pose, cmd, speeds, yaw_rates, speed_cap, sp
   cap_prev = jnp.minimum(speed_cap_xy(speed_cap, m_origin, m_res, pose[0], pose[1]), limit_now)
   x, y = pose[0], pose[1]
   seen = top = jnp.uint16(0)
+  total = jnp.int32(0)
   excess = jnp.float32(0.0)
   d2_min = [jnp.float32(jnp.inf)] * m
   xs, ys = [], []
@@ -272,6 +273,8 @@ def one_pass_terms(lut, origin, res, pose, cmd, speeds, yaw_rates, speed_cap, sp
     code_mid, code_end = lut_at(lut, origin, res, mx, my), lut_at(lut, origin, res, x, y)
     seen = seen | code_mid | code_end
     top = jnp.maximum(top, jnp.maximum(code_mid, code_end))
+    if p.cost_weight > 0:
+      total = total + (code_end >> LUT_CLEARANCE_SHIFT).astype(jnp.int32)
     cap_end = speed_cap_xy(speed_cap, m_origin, m_res, x, y)
     cap = jnp.minimum(jnp.minimum(cap_end, cap_prev), speed_cap_xy(speed_cap, m_origin, m_res, mx, my))
     excess = excess + jnp.maximum(interval_v[:, None, t] - cap, 0.0)
@@ -290,6 +293,8 @@ def one_pass_terms(lut, origin, res, pose, cmd, speeds, yaw_rates, speed_cap, sp
          "approach": _approach(jnp.stack([a.reshape(c) for a in d2_min], 1), near["neg"], config),
          "d2_end": jnp.stack([a.reshape(c) for a in d2], 1),
          "neg": near["neg"], "rel_near": near["rel"], "x_end": x, "y_end": y, "hc": tab["hc"], "hs": tab["hs"]}
+  if p.cost_weight > 0:
+    out["mean_cost"] = total.reshape(-1) / (252.0 * t_steps)
   if full:
     out["x"], out["y"] = jnp.stack(xs, -1), jnp.stack(ys, -1)
   return out
@@ -524,7 +529,8 @@ def evaluate_lut(pose, cmd, goal, limit_now, recovering, lut, origin, res, other
   Returns:
     dict of per-candidate arrays (C = Nv * Nw, speed-major): targets float32 [C, 2],
     xy float32 [C, T+1, 2] (m, only with full), collide bool [C], violation float32 [C]
-    (m/s x s), progress, heading, clearance, score float32 [C].
+    (m/s x s), progress, heading, clearance, score float32 [C]; with
+    `PlannerConfig.cost_weight` > 0 also mean_cost float32 [C].
   """
   p, r = config.planner, config.robot
   speeds_np, yaw_rates_np = target_axes(config, extra_speeds)
@@ -537,6 +543,7 @@ def evaluate_lut(pose, cmd, goal, limit_now, recovering, lut, origin, res, other
     t = one_pass_terms(lut, origin, res, pose, cmd, speeds, yaw_rates, speed_cap, speed_mask, limit_now,
                        others, others_valid, config, full=full)
     collide, clearance, violation = t["collide_costmap"], t["clearance"], t["violation"]
+    mean_cost = t.get("mean_cost")
     approach, d2_end, neg, rel_near = t["approach"], t["d2_end"], t["neg"], t["rel_near"]
     x_end, y_end, hc, hs = t["x_end"], t["y_end"], t["hc"], t["hs"]
     x, y = t.get("x"), t.get("y")
@@ -547,6 +554,10 @@ def evaluate_lut(pose, cmd, goal, limit_now, recovering, lut, origin, res, other
     with jax.named_scope("costmap_rules"):
       collide, clearance = _costmap_rules(lut, origin, res, pose, x, y, mx, my,
                                           inscribed_is_collision=p.inscribed_is_collision)
+      mean_cost = None
+      if p.cost_weight > 0:
+        end_costs = (lut_at(lut, origin, res, x, y) >> LUT_CLEARANCE_SHIFT).astype(jnp.int32)
+        mean_cost = jnp.sum(end_costs, axis=-1).reshape(-1) / (252.0 * end_costs.shape[-1])   # as one_pass_terms
     with jax.named_scope("monitor"):
       near = _nearest_others(pose, others, others_valid, config)
       approach, d2_end = _monitor(pose, near, x, y, config)
@@ -594,8 +605,12 @@ def evaluate_lut(pose, cmd, goal, limit_now, recovering, lut, origin, res, other
     score = (jnp.where(recovering, recovery, normal)
              + p.clearance_weight * clearance + p.speed_weight * speed_term
              + _SPEED_PENALTY * violation + jnp.where(collide, _COLLISION, 0.0))
+    if p.cost_weight > 0:
+      score = score + p.cost_weight * mean_cost
   out = {"targets": targets, "collide": collide, "violation": violation,
          "progress": progress, "heading": heading, "clearance": clearance, "score": score}
+  if p.cost_weight > 0:
+    out["mean_cost"] = mean_cost
   if full:
     xs = jnp.concatenate([jnp.full((c, 1), pose[0]), flat(x)], axis=1)
     ys = jnp.concatenate([jnp.full((c, 1), pose[1]), flat(y)], axis=1)

@@ -184,6 +184,43 @@ def test_planner_stops_rather_than_enter_keepout(tiny):
   assert poses[:, 0].max() < 5.0
 
 
+@pytest.mark.parametrize("fused", [False, True], ids=["cpu", "fused"])
+def test_cost_weight_steers_to_the_low_side_of_a_cost_band(tiny, monkeypatch, fused):
+  """PlannerConfig.cost_weight scores the mean cost along each rollout: with a robot in a band of cost 120
+  that reaches to its left, heading +x toward its goal, the default planner drives straight on (every
+  candidate meets the same highest cost), the weighted one turns right, out of the band;
+  the CPU's rollout and the GPU's one-pass form give the same terms."""
+  if fused:
+    monkeypatch.setattr(planner, "rollout_mode", lambda: "fused")
+  nav = _field_to(tiny, (7.0, 3.0))
+  p, n = tiny.params, tiny.window_cells
+  res = float(p.map_resolution)
+  pose = jnp.asarray([0.6, 3.0, 0.0], jnp.float32)
+  origin = pose[:2] - n * res / 2
+  cost = np.zeros((n, n), np.uint8)
+  rows_y = float(origin[1]) + (np.arange(n) + 0.5) * res
+  cost[rows_y > 2.9] = 120                                       # under the robot and to its left
+  chosen = {}
+  for weight in (0.0, 8.0):
+    cfg = dataclasses.replace(tiny.config, planner=dataclasses.replace(tiny.config.planner, cost_weight=weight))
+    ev = jax.jit(lambda pose: planner.evaluate(
+        pose, jnp.asarray([0.5, 0.0]), jnp.asarray(0), jnp.asarray(jnp.inf), jnp.asarray(False),
+        jnp.asarray(cost), planner.hard_cells(jnp.asarray(cost)), origin, jnp.asarray(res, jnp.float32),
+        jnp.zeros((1, 2)), jnp.zeros((1,), bool), nav, p.speed, p.speed_cap, config=cfg))(pose)
+    best = int(np.argmin(np.asarray(ev["score"])))
+    chosen[weight] = np.asarray(ev["targets"])[best]
+    if weight:
+      mean_cost = np.asarray(ev["mean_cost"])
+      straight = int(np.argmin(np.abs(np.asarray(ev["targets"])[:, 1]) + 10 * (np.asarray(ev["targets"])[:, 0] < 0.5)))
+      assert mean_cost[best] < mean_cost[straight]
+      # The mean cost is the rollout points' costs, counted exactly: here 0 or 120 per point.
+      np.testing.assert_allclose(mean_cost * 252.0 * tiny.config.planner.num_rollout_steps % 120, 0, atol=1e-3)
+    else:
+      assert "mean_cost" not in ev
+  assert chosen[0.0][1] == 0.0 and chosen[0.0][0] > 0
+  assert chosen[8.0][1] < 0.0                                       # right turn, away from the band
+
+
 @pytest.mark.parametrize("mode", ["cumsum", "chain"])
 def test_rollout_grid_matches_a_unicycle_in_doubles(mode):
   cfg = FleetConfig()
