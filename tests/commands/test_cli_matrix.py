@@ -1,8 +1,9 @@
 """The CLI matrix: (command, input, exit code, message) for the inputs users and fuzzers tripped on.
 
 Every bad input exits 2 with one line on stderr (after any warning lines) before anything is
-simulated; options are applied or refused, never ignored. The last tests run short simulations to
-check that `--seconds` is honoured and that `fleet --params` applies the params file.
+simulated; options are applied or refused, never ignored. The last tests run one short simulation
+(twice, the second from the compilation cache) to check that `--seconds` is honoured, that `fleet
+--params` applies the params file and that a broken rule exits 3.
 """
 
 import json
@@ -136,13 +137,17 @@ def test_query_and_fleet_share_speed_defaults(tmp_path, capsys):
   assert row["speed_limit"] == 50.0 and row["speed_limit_type"] == "percent"
 
 
+# The short simulations below all run this fleet, so they compile its two chunk programs once (the
+# session's compilation cache, tests/conftest.py, serves the later runs).
+SHORT_FLEET = ["fleet", "--robots", "2", "--seconds", "0.65", "--chunk-seconds", "0.4", "--no-cache",
+               "--map", str(ASSETS / "default_map.yaml"), "--params", str(ASSETS / "nav2_params.yaml")]
+
+
 @pytest.mark.slow
 def test_fleet_params_and_exact_seconds(tmp_path, capsys):
   """`fleet --params` applies the params file; --seconds 0.65 is 3 steps (said), in chunks of 2 + 1."""
   out = tmp_path / "o"
-  rc = cli.main(["fleet", "--robots", "2", "--seconds", "0.65", "--chunk-seconds", "0.4", "--no-cache",
-                 "--map", str(ASSETS / "default_map.yaml"), "--params", str(ASSETS / "nav2_params.yaml"),
-                 "--out", str(out)])
+  rc = cli.main([*SHORT_FLEET, "--out", str(out)])
   err = capsys.readouterr().err
   assert rc == 0, err
   assert "note: --seconds 0.65 is not a whole number of 0.2 s env steps; simulating 3 steps (0.6 s)" in err
@@ -150,3 +155,15 @@ def test_fleet_params_and_exact_seconds(tmp_path, capsys):
   assert summary["fleet"]["seconds"] == pytest.approx(0.6)
   assert summary["scenario"]["params"] == str(ASSETS / "nav2_params.yaml")
   assert summary["scenario"]["speed_filter"] == {"type": 1, "base": 100.0, "multiplier": -1.0}
+
+
+def test_rule_violation_exit_code_is_3(monkeypatch, tmp_path):
+  from sims.fleet import metrics
+  real = metrics.summarize
+  def violated(*a, **k):
+    s = real(*a, **k)
+    s["fleet"]["keepout_entries"] = 1
+    return s
+  monkeypatch.setattr(metrics, "summarize", violated)
+  rc = cli.main([*SHORT_FLEET, "--out", str(tmp_path / "v")])
+  assert rc == cli.EXIT_VIOLATION

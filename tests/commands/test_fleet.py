@@ -82,19 +82,6 @@ def test_internal_error_is_one_line_with_code_1(monkeypatch, capsys, tmp_path):
   assert "second line" not in err[-1] and not any("Traceback" in e for e in err)
 
 
-def test_rule_violation_exit_code_is_3(monkeypatch, tmp_path, capsys):
-  from sims.fleet import metrics
-  real = metrics.summarize
-  def violated(*a, **k):
-    s = real(*a, **k)
-    s["fleet"]["keepout_entries"] = 1
-    return s
-  monkeypatch.setattr(metrics, "summarize", violated)
-  rc = cli.main(["fleet", "--robots", "2", "--steps", "2", "--chunk-seconds", "0.2", "--out", str(tmp_path / "v"),
-                 "--no-cache"])
-  assert rc == cli.EXIT_VIOLATION
-
-
 def test_tb3_sandbox_with_nav2_filter_masks_runs(tmp_path, nav2_maps, capsys):
   """Nav2's own filter demo: sandbox map, keepout mask (mostly unknown) and speed mask."""
   out = tmp_path / "tb3"

@@ -130,8 +130,9 @@ with contextlib.redirect_stderr(err):
                ["fleet", "--devices", "{DEVICES + 1}", "--robots", "8", "--robots-per-world", "2", "--steps", "1"],
                ["fleet", "--devices", "two", "--robots", "8", "--steps", "1"]):
     codes.append(cli.main(argv))
-  codes.append(cli.main(["fleet", "--devices", "all", "--robots", "8", "--robots-per-world", "1", "--steps", "1",
-                         "--out", sys.argv[2], "--no-cache", "--record-robots", "2"]))
+  # The rollout's shapes above (8 worlds x {K} robots, {STEPS} steps): the sharded programs come from the cache.
+  codes.append(cli.main(["fleet", "--devices", "all", "--robots", "{WORLDS * K}", "--robots-per-world", "{K}",
+                         "--steps", "{STEPS}", "--out", sys.argv[2], "--no-cache", "--record-robots", "2"]))
 out["cli_codes"] = codes
 out["cli_stderr"] = err.getvalue()
 print("RESULT " + json.dumps(out))
