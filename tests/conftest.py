@@ -75,7 +75,8 @@ SLOW_FILES = ("project/test_notebooks.py", "scale/test_sharding.py", "commands/t
               "jaxfilters/test_keepout_prologue.py", "jaxfilters/test_keepout_paths_random.py",
               "commands/test_cli_matrix.py", "jaxfilters/test_keepout_pallas.py", "commands/test_fleet.py",
               "jaxfilters/test_shapes.py", "rl/test_layouts.py", "rl/test_gym.py",
-              "jaxfilters/test_keepout_footprint.py", "fuzz/test_map_files.py")
+              "jaxfilters/test_keepout_footprint.py", "fuzz/test_map_files.py", "rl/test_brax_ppo.py",
+              "rl/test_registry.py", "fleet/test_one_way_lanes.py", "fleet/test_fleet_layers.py")
 TESTS = Path(__file__).resolve().parent
 
 
