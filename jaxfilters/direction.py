@@ -35,8 +35,10 @@ Value problems are masked and flagged, never raised (also under `jit`): a
 robot with a traced out-of-range `mask_index`, unusable mask or costmap
 geometry (`types.mask_geometry_ok`), or a non-finite pose or velocity keeps
 its costmap untouched, gets `wrong_way` False and `error` True. A mask whose
-info type is not 5 makes the filter inert (as Nav2 filters ignore masks of
-another type). Static problems (shapes, dtypes, a bad config) raise.
+info type is not 5 changes nothing either (Nav2's filters log an error and
+ignore a mask of another type) and sets `error`, so a keepout or speed mask
+passed here by mistake is never silent. Static problems (shapes, dtypes, a
+bad config) raise.
 """
 
 from __future__ import annotations
@@ -214,7 +216,8 @@ def direction_filter_one(cost, origin, res, data, mask_origin, mask_res, info, p
   write = ok & on_mask & wrong
   new_cost = jnp.where(write, jnp.uint8(constants.LETHAL_OBSTACLE), cost)
   blocked = jnp.sum(write & (cost != constants.LETHAL_OBSTACLE), dtype=jnp.int32)
-  error = (enabled & ~ok) | (ok & (jnp.any(on_mask & bad) | (inside & bad_here)))
+  wrong_type = info.type != constants.DIRECTION_FILTER      # Nav2 logs an error and ignores such a mask
+  error = (enabled & ~ok) | (ok & (wrong_type | jnp.any(on_mask & bad) | (inside & bad_here)))
   constrained_here = ok & inside & constrained_here
   return new_cost, DirectionResult(constrained_here & wrong_here & moving, constrained_here, blocked, error)
 
@@ -226,7 +229,7 @@ def direction_filter(costmap: Costmap, mask: FilterMask, poses, *, velocities=No
 
   Args:
     costmap: Costmap [B] of the robots (each robot's own map).
-    mask: FilterMask of type 5 (another type makes the filter inert); M = 1
+    mask: FilterMask of type 5 (another type changes nothing and sets `error`); M = 1
       shared or a stack with `mask_index`.
     poses: float [B, 3] (x, y, yaw) in the costmap frame; the yaw is the
       heading the costmap is made for.

@@ -133,10 +133,10 @@ def test_unconstrained_cells_and_other_mask_types_are_untouched():
   np.testing.assert_array_equal(got[1], cost[1])                           # eastbound: nothing
   assert res.constrained.tolist() == [False, False, True] and res.wrong_way.tolist() == [False, False, True]
   assert res.blocked_cells.tolist() == [int((cost[0, :, 2] != 254).sum()), 0, int((cost[2, :, 2] != 254).sum())]
-  # A keepout-typed mask with the same bytes makes the filter inert.
+  # A keepout-typed mask with the same bytes changes nothing and is flagged, never silent.
   out, res = jf.direction_filter(cm, _mask(data, ftype=constants.KEEPOUT_FILTER), poses)
   np.testing.assert_array_equal(np.asarray(out.cost), cost)
-  assert not res.wrong_way.any() and not res.constrained.any() and not res.error.any()
+  assert not res.wrong_way.any() and not res.constrained.any() and res.error.all()
 
 
 def test_velocity_direction_decides_wrong_way_motion():
