@@ -382,18 +382,9 @@ class FleetEnv:
     return self.update_costmaps(state)
 
   def robot_plans(self, state: WorldState) -> tuple[jax.Array, jax.Array]:
-    """Each robot's global plan to its goal (`navigation.trace_plan`), for an AsymmetricInflationLayer.
-
-    Args:
-      state: WorldState of one world.
-
-    Returns:
-      (float32 [K, P, 2] world metres, the map's frame = the local costmaps'; int32 [K]
-      points in use) with P = `world.plan_points`.
-
-    Raises:
-      ValueError: a world without an AsymmetricInflationLayer (P = 0: nothing reads plans).
-    """
+    """Each robot's plan to its goal (`navigation.trace_plan`) for an AsymmetricInflationLayer: float32
+    [K, P, 2] world metres (the local costmaps' frame) and int32 [K] points in use, P = `world.plan_points`.
+    Raises ValueError for a world without such a layer (P = 0: nothing reads plans)."""
     w = self.world
     if not w.plans_needed:
       raise ValueError("robot_plans: this world's local costmaps run no AsymmetricInflationLayer "
@@ -403,17 +394,9 @@ class FleetEnv:
     return jax.vmap(trace)(state.goal, poses)
 
   def update_costmaps(self, state: WorldState) -> WorldState:
-    """Rebuilds every robot's local costmap (and the planner's table of it) at the current poses.
-
-    The inflation layers are `world.local_inflation_layers`; an AsymmetricInflationLayer
-    among them reads each robot's own plan (`robot_plans`) and position.
-
-    Args:
-      state: WorldState of one world.
-
-    Returns:
-      The state with `local`, `keepout` and `plan_lut` rebuilt.
-    """
+    """Rebuilds every robot's local costmap, its keepout state and the planner's table of it at the
+    current poses; the layers are `world.local_inflation_layers` (an AsymmetricInflationLayer reads
+    each robot's own plan, `robot_plans`, and position)."""
     cfg, p = self.config, self.params
     poses = state.data.qpos[:, :3]
     paths = lengths = None

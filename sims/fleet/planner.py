@@ -1,45 +1,37 @@
 """Local planner for one robot: enumerate (v, w) targets, roll out, reject, score.
 
-Each candidate is a target twist (v, w) with v in [0, max_speed] (plus one
-slow reverse speed) and w in [-max_yaw_rate, max_yaw_rate]. Its rollout
-starts from the robot's pose and last command and ramps toward the target
-within the acceleration limits (a unicycle, `rollout_dt` steps over
-`horizon`). A candidate is rejected when
-
-* a rollout point or interval midpoint lands on a lethal (254, including
-  keepout cells written by the keepout filter) or unknown (255) cell of the
-  robot's local costmap, or on an inscribed (253) cell unless the robot
-  already stands on one (so it can always back out of another robot's
-  inflation; `PlannerConfig.inscribed_is_collision` drops that exception, as
-  Nav2's controllers do for a circular robot);
-* it brings the robot closer than 2 * radius + monitor_margin to another
-  robot's current position (a collision monitor in the spirit of Nav2's
-  FootprintApproach; moving away is always allowed).
+Each candidate is a target twist (v, w), v in [0, max_speed] (plus one slow reverse
+speed), w in [-max_yaw_rate, max_yaw_rate]; its rollout ramps from the robot's pose and
+last command toward it within the acceleration limits (a unicycle, `rollout_dt` steps
+over `horizon`). A candidate is rejected when a rollout point or interval midpoint lands
+on a lethal (254, keepout cells included) or unknown (255) cell of the local costmap, or
+on an inscribed (253) cell unless the robot stands on one (so it can back out of another
+robot's inflation; `PlannerConfig.inscribed_is_collision` drops that exception, as Nav2's
+controllers do for a circular robot); or when it brings the robot closer than 2 * radius
++ monitor_margin to another robot (a collision monitor in the spirit of Nav2's
+FootprintApproach; moving away is always allowed).
 
 Speed compliance at zone entry: every rollout interval [p_t, p_t+1] must have
 max(|v_t|, |v_t+1|) <= the speed-mask limit at its ends and midpoint
-(`jaxfilters.speed.speed_limit_at_one`'s limit per mask cell, dilated by one
-cell; like Nav2's SpeedFilter path lookahead, docs/nav2_semantics.md §5.6, applied to the
-candidate's own path), and the first interval also respects the limit in
-force. The excess is integrated and penalised above every other term, so the
-robot brakes *before* a slower zone. Surviving candidates are scored by
-progress along the navigation function, heading toward the field's descent
-direction, clearance and speed, plus a keep-right rule when another robot is
-ahead. Reversing is used only in recovery mode or when every forward
-candidate is blocked; if every candidate collides, the robot stops (it never
+(`jaxfilters.speed.speed_limit_at_one` per mask cell, dilated by one cell; Nav2's path
+lookahead, docs/nav2_semantics.md §5.6, on the candidate's own path), and the first
+interval the limit in force; the excess is penalised above every other term, so the robot
+brakes *before* a slower zone. Survivors are scored by progress along the navigation
+function, heading toward its descent direction, clearance (the highest cost along the
+rollout), optionally the mean cost along it (`cost_weight`) and speed, plus a keep-right
+rule when another robot is ahead. Reversing is used only in recovery mode or when every
+forward candidate is blocked; if every candidate collides, the robot stops (it never
 drives into a keepout cell).
 
-Cost of a tick (the fleet's largest part; benchmarks/fleet_breakdown.py
-times it): the candidates form a speeds x yaw rates grid, so speed ramps and
-heading rotations run once per axis value (`ramp_tables`); the costmap rules
-are one uint16 code per cell (`lookup_table`, built with the costmap at its
-5 Hz rate), so each rollout point costs one gather for every rule and the
-clearance. On the CPU the points are materialised once (`rollout_grid`) and
-each rule runs over them, the navigation value and its descent stencil one
-gather per candidate (`navigation.value_and_direction`); on a GPU every rule
-is folded into one pass over the rollout steps (`one_pass_terms`) and the
-navigation lookups are elementwise (`navigation.value_and_direction_xy`), so
-the tick writes no per-point array (`rollout_mode`).
+Cost of a tick (the fleet's largest part; benchmarks/fleet_breakdown.py times it): the
+candidates form a speeds x yaw rates grid, so ramps and rotations run once per axis value
+(`ramp_tables`); the costmap rules are one uint16 code per cell (`lookup_table`, built at
+the costmap's 5 Hz), one gather per rollout point for every rule and the costs. On the CPU
+the points are materialised once (`rollout_grid`) and each rule runs over them, the
+navigation value and descent stencil one gather per candidate
+(`navigation.value_and_direction`); on a GPU every rule is folded into one pass over the
+rollout steps (`one_pass_terms`) with elementwise navigation lookups
+(`navigation.value_and_direction_xy`), writing no per-point array (`rollout_mode`).
 
 Written for one robot; sims/fleet/env.py vmaps it over the robots of a world.
 """
@@ -273,8 +265,7 @@ def one_pass_terms(lut, origin, res, pose, cmd, speeds, yaw_rates, speed_cap, sp
     code_mid, code_end = lut_at(lut, origin, res, mx, my), lut_at(lut, origin, res, x, y)
     seen = seen | code_mid | code_end
     top = jnp.maximum(top, jnp.maximum(code_mid, code_end))
-    if p.cost_weight > 0:
-      total = total + (code_end >> LUT_CLEARANCE_SHIFT).astype(jnp.int32)
+    total = total + (code_end >> LUT_CLEARANCE_SHIFT).astype(jnp.int32) if p.cost_weight > 0 else total
     cap_end = speed_cap_xy(speed_cap, m_origin, m_res, x, y)
     cap = jnp.minimum(jnp.minimum(cap_end, cap_prev), speed_cap_xy(speed_cap, m_origin, m_res, mx, my))
     excess = excess + jnp.maximum(interval_v[:, None, t] - cap, 0.0)
@@ -292,9 +283,8 @@ def one_pass_terms(lut, origin, res, pose, cmd, speeds, yaw_rates, speed_cap, sp
          "violation": excess.reshape(c) * p.rollout_dt,
          "approach": _approach(jnp.stack([a.reshape(c) for a in d2_min], 1), near["neg"], config),
          "d2_end": jnp.stack([a.reshape(c) for a in d2], 1),
-         "neg": near["neg"], "rel_near": near["rel"], "x_end": x, "y_end": y, "hc": tab["hc"], "hs": tab["hs"]}
-  if p.cost_weight > 0:
-    out["mean_cost"] = total.reshape(-1) / (252.0 * t_steps)
+         "neg": near["neg"], "rel_near": near["rel"], "x_end": x, "y_end": y, "hc": tab["hc"], "hs": tab["hs"],
+         **({"mean_cost": total.reshape(-1) / (252.0 * t_steps)} if p.cost_weight > 0 else {})}
   if full:
     out["x"], out["y"] = jnp.stack(xs, -1), jnp.stack(ys, -1)
   return out
@@ -554,10 +544,8 @@ def evaluate_lut(pose, cmd, goal, limit_now, recovering, lut, origin, res, other
     with jax.named_scope("costmap_rules"):
       collide, clearance = _costmap_rules(lut, origin, res, pose, x, y, mx, my,
                                           inscribed_is_collision=p.inscribed_is_collision)
-      mean_cost = None
-      if p.cost_weight > 0:
-        end_costs = (lut_at(lut, origin, res, x, y) >> LUT_CLEARANCE_SHIFT).astype(jnp.int32)
-        mean_cost = jnp.sum(end_costs, axis=-1).reshape(-1) / (252.0 * end_costs.shape[-1])   # as one_pass_terms
+      mean_cost = (jnp.sum((lut_at(lut, origin, res, x, y) >> LUT_CLEARANCE_SHIFT).astype(jnp.int32), axis=-1)
+                   .reshape(-1) / (252.0 * x.shape[-1]) if p.cost_weight > 0 else None)   # as one_pass_terms
     with jax.named_scope("monitor"):
       near = _nearest_others(pose, others, others_valid, config)
       approach, d2_end = _monitor(pose, near, x, y, config)
@@ -602,15 +590,13 @@ def evaluate_lut(pose, cmd, goal, limit_now, recovering, lut, origin, res, other
     d_end = jnp.sqrt(jnp.min(jnp.where(jnp.isfinite(neg)[None, :], d2_end, jnp.inf), axis=1))
     separation = -jnp.minimum(d_end, 2.0) / 2.0
     recovery = 0.3 * p.progress_weight * progress + separation + 0.2 * targets[:, 1] / r.max_yaw_rate
-    score = (jnp.where(recovering, recovery, normal)
-             + p.clearance_weight * clearance + p.speed_weight * speed_term
-             + _SPEED_PENALTY * violation + jnp.where(collide, _COLLISION, 0.0))
-    if p.cost_weight > 0:
-      score = score + p.cost_weight * mean_cost
+    mean_term = (p.cost_weight * mean_cost,) if p.cost_weight > 0 else ()   # no op at all when 0
+    score = sum(mean_term, jnp.where(recovering, recovery, normal)
+                + p.clearance_weight * clearance + p.speed_weight * speed_term
+                + _SPEED_PENALTY * violation + jnp.where(collide, _COLLISION, 0.0))
   out = {"targets": targets, "collide": collide, "violation": violation,
-         "progress": progress, "heading": heading, "clearance": clearance, "score": score}
-  if p.cost_weight > 0:
-    out["mean_cost"] = mean_cost
+         "progress": progress, "heading": heading, "clearance": clearance, "score": score,
+         **({"mean_cost": mean_cost} if p.cost_weight > 0 else {})}
   if full:
     xs = jnp.concatenate([jnp.full((c, 1), pose[0]), flat(x)], axis=1)
     ys = jnp.concatenate([jnp.full((c, 1), pose[1]), flat(y)], axis=1)

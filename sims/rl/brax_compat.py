@@ -35,7 +35,7 @@ import types
 import jax
 import numpy as np
 
-__all__ = ["BRAX_MODULES", "device_put_replicated", "install", "installed"]
+__all__ = ["BRAX_MODULES", "device_put_replicated", "install", "installed", "jax_has_device_put_replicated"]
 
 BRAX_MODULES = ("brax.training.pmap", "brax.training.agents.ppo.train", "brax.training.agents.apg.train",
                 "brax.training.agents.sac.train")
@@ -76,7 +76,8 @@ _PROXY = _JaxForBrax("jax", "jax, with device_put_replicated for Brax (sims.rl.b
 _PROXY.device_put_replicated = device_put_replicated
 
 
-def _jax_has_it() -> bool:
+def jax_has_device_put_replicated() -> bool:
+  """True where this jax still has `jax.device_put_replicated` (then Brax needs no shim)."""
   try:
     return callable(jax.device_put_replicated)
   except AttributeError:
@@ -85,7 +86,7 @@ def _jax_has_it() -> bool:
 
 def installed() -> bool:
   """True when Brax's PPO can replicate its state: JAX still has the function, or `install()` ran."""
-  return _jax_has_it() or importlib.import_module("brax.training.agents.ppo.train").jax is _PROXY
+  return jax_has_device_put_replicated() or importlib.import_module("brax.training.agents.ppo.train").jax is _PROXY
 
 
 def install() -> bool:
@@ -96,7 +97,7 @@ def install() -> bool:
     ImportError: Brax is not installed (the `rl` extra).
     RuntimeError: one of those modules' `jax` was already replaced by something else.
   """
-  if _jax_has_it():
+  if jax_has_device_put_replicated():
     return False
   for name in BRAX_MODULES:
     module = importlib.import_module(name)

@@ -16,7 +16,7 @@ from mujoco_playground import wrapper
 
 from sims.rl import brax_compat, registry
 
-pytestmark = pytest.mark.skipif(brax_compat._jax_has_it(),
+pytestmark = pytest.mark.skipif(brax_compat.jax_has_device_put_replicated(),
                                 reason="this jax still has device_put_replicated: Brax needs no shim")
 
 TINY = dict(num_timesteps=256, episode_length=8, num_envs=4, batch_size=4, num_minibatches=2, unroll_length=4,
