@@ -36,6 +36,7 @@ import jax  # noqa: E402
 import jax.numpy as jnp  # noqa: E402
 
 import jaxfilters as jf  # noqa: E402
+from benchmarks.latency import time_calls  # noqa: E402
 
 N = 800
 RES = 0.05
@@ -64,17 +65,6 @@ def scene(b: int, poses: int, seed: int = 0):
   return costs, paths, np.full((b,), poses, np.int32), paths[:, 0].copy()
 
 
-def _median_ms(fn, args, reps):
-  jax.block_until_ready(fn(*args))
-  jax.block_until_ready(fn(*args))
-  ts = []
-  for _ in range(reps):
-    t = time.perf_counter()
-    jax.block_until_ready(fn(*args))
-    ts.append(time.perf_counter() - t)
-  return 1e3 * float(np.median(ts))
-
-
 def row(b: int, poses: int, reps: int, check: bool) -> dict:
   cfg = config()
   costs, paths, lengths, xy = scene(b, poses)
@@ -86,7 +76,7 @@ def row(b: int, poses: int, reps: int, check: bool) -> dict:
     t = time.perf_counter()
     res = jax.block_until_ready(fn(*args))
     out[f"{name}_first_s"] = time.perf_counter() - t
-    out[f"{name}_ms"] = _median_ms(fn, args, reps)
+    out[f"{name}_ms"] = 1e3 * time_calls(fn, [args], min_s=0.0, min_n=reps, max_n=reps)[0]
     out[f"{name}_raised_cells"] = int(np.sum(np.asarray(res) != costs))
   if check:
     from reference import asymmetric_inflation as ref

@@ -18,15 +18,10 @@ from sims.fleet import local_costmap
 from sims.fleet.config import FleetConfig
 from sims.fleet.env import FleetEnv
 from sims.fleet.scenario import Scenario
+from tests.nav2_layers import local_layers
 
 RES = 0.05
-PARAMS = """\
-local_costmap:
-  local_costmap:
-    ros__parameters:
-      resolution: 0.05
-      robot_radius: 0.22
-      plugins: [{plugins}]
+LAYERS = """\
       lane_layer:
         plugin: "nav2_costmap_2d::AsymmetricInflationLayer"
         inflation_radius: 1.5
@@ -45,9 +40,7 @@ def _grid(data):
 
 
 def _layers(tmp, plugins):
-  path = tmp / f"{'_'.join(plugins)}.yaml"
-  path.write_text(PARAMS.format(plugins=", ".join(f'"{p}"' for p in plugins)))
-  return jf.load_params(path, costmaps=("local_costmap",)).local_costmap.layers
+  return local_layers(tmp, plugins, LAYERS)
 
 
 def _scenario(layers=()):

@@ -349,17 +349,22 @@ def test_speed_absolute_namespaces_wildcards_lookahead_and_type_checks(tmp_path)
   assert not bool(np.any(np.asarray(out.percentage)))
 
 
-@pytest.mark.parametrize("extra, expected", [
-    ({}, (0.0, False)),                                       # absent: Nav2 main's behaviour
-    ({"max_path_rewind": 1.5, "clear_path_on_reset": True}, (1.5, True)),
-])
-def test_speed_lookahead_rewind_and_clear_path_parameters(tmp_path, extra, expected):
+def _lookahead_params(tmp_path, extra):
+  """A params file with a lookahead SpeedFilter whose parameters are `extra` on top of the defaults."""
   _write_mask(tmp_path, "spd", [[0, 20]])
   speed = {"plugin": "nav2_costmap_2d::SpeedFilter", "filter_info_topic": "speed_info",
            "enable_path_lookahead": True, **extra}
   path = _write_params(tmp_path, {"filters": ["speed_filter"], "speed_filter": speed},
                        _servers("speed", 1, yaml_filename="spd.yaml"))
-  la = nav2.load_params(path).global_costmap.speed.lookahead
+  return path
+
+
+@pytest.mark.parametrize("extra, expected", [
+    ({}, (0.0, False)),                                       # absent: Nav2 main's behaviour
+    ({"max_path_rewind": 1.5, "clear_path_on_reset": True}, (1.5, True)),
+])
+def test_speed_lookahead_rewind_and_clear_path_parameters(tmp_path, extra, expected):
+  la = nav2.load_params(_lookahead_params(tmp_path, extra)).global_costmap.speed.lookahead
   assert (la.max_path_rewind, la.clear_path_on_reset) == expected
   assert la == jf.LookaheadConfig(max_path_rewind=expected[0], clear_path_on_reset=expected[1])
 
@@ -370,13 +375,8 @@ def test_speed_lookahead_rewind_and_clear_path_parameters(tmp_path, extra, expec
     ({"clear_path_on_reset": 1}, r"clear_path_on_reset"),
 ])
 def test_speed_lookahead_rewind_parameters_bad_values(tmp_path, extra, match):
-  _write_mask(tmp_path, "spd", [[0, 20]])
-  speed = {"plugin": "nav2_costmap_2d::SpeedFilter", "filter_info_topic": "speed_info",
-           "enable_path_lookahead": True, **extra}
-  path = _write_params(tmp_path, {"filters": ["speed_filter"], "speed_filter": speed},
-                       _servers("speed", 1, yaml_filename="spd.yaml"))
   with pytest.raises(ValueError, match=match):        # Nav2ParamsError, or the float32 check's ValueError
-    nav2.load_params(path)
+    nav2.load_params(_lookahead_params(tmp_path, extra))
 
 
 def _keepout_file(tmp_path, keepout=None, info=None, extra=None, filters=("keepout_filter",)):

@@ -10,14 +10,9 @@ from jaxfilters.static_layer import static_layer
 from sims.fleet.scenario import Scenario
 from sims.fleet.world import STATIC_LAYER
 from sims.rl.env import NavEnv
+from tests.nav2_layers import local_layers
 
-PARAMS = """\
-local_costmap:
-  local_costmap:
-    ros__parameters:
-      resolution: 0.05
-      robot_radius: 0.22
-      plugins: [{plugins}]
+LAYERS = """\
       lane_layer:
         plugin: "nav2_costmap_2d::AsymmetricInflationLayer"
         cost_scaling_factor_left: 8.0
@@ -30,9 +25,7 @@ local_costmap:
 
 
 def _layers(tmp_path, plugins):
-  path = tmp_path / f"{'_'.join(plugins)}.yaml"
-  path.write_text(PARAMS.format(plugins=", ".join(f'"{p}"' for p in plugins)))
-  return jf.load_params(path, costmaps=("local_costmap",)).local_costmap.layers
+  return local_layers(tmp_path, plugins, LAYERS)
 
 
 def _scenario(layers=()):
