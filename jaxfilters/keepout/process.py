@@ -111,7 +111,7 @@ def keepout_filter(costmap: Costmap, mask: FilterMask, poses, state: KeepoutStat
     if state.error is None:
       state = dataclasses.replace(state, error=np.zeros((costmap.num_robots,), bool))
     sub = jax.tree.map(lambda x: np.asarray(x)[sel], (costmap, idx, idx_ok, state, window, enabled, transform))
-    sub_out, sub_state = _exact_batch(*sub, mask=mask, config=config)
+    sub_out, sub_state = _exact_batch(*sub, mask=mask, config=config, exact=size <= EXACT_PATH_REDO_MAX)
     # The padding slots (robot redo[0] again) are dropped.
     out, new_state = jax.tree.map(lambda x, v: _put(x, v, redo), (out, new_state), (sub_out, sub_state))
   return out, new_state
@@ -119,6 +119,12 @@ def keepout_filter(costmap: Costmap, mask: FilterMask, poses, state: KeepoutStat
 
 # An eager call redoes on the host at most this fraction of its robots (see keepout_filter).
 HOST_REDO_MAX_FRACTION = 0.25
+# A host redo of at most this many robots (the power-of-two sub-fleet) runs the exact per-cell path
+# itself: it compiles in ~2.6 s on this project's 2-core CPU against ~8 s for the fast path with its
+# exact reruns (the README's first call at B = 4,096 redoes 6 robots: 10.3 s -> 4.6 s cold), and runs
+# 16 robots of 60 x 60 in ~30 ms. Larger sub-fleets run the fast path with the exact reruns in it,
+# whose run time grows far slower with the robots (20 ms against 380 ms at 256).
+EXACT_PATH_REDO_MAX = 16
 
 
 @functools.partial(jax.jit, static_argnames=("config", "exact", "plan"))
@@ -205,10 +211,11 @@ def filter_batch(costmap, mask, idx, idx_ok, state, window, enabled, transform, 
                        loop=loop, plan=plan)
 
 
-def _exact_sub_fleet(costmap, idx, idx_ok, state, window, enabled, transform, *, config, mask):
-  """The redo of an eager call's open robots: the fast path with its exact reruns in the program
-  (what a jitted call runs; the tests hold it to the exact path's integers)."""
-  return _filter_batch(costmap, mask, idx, idx_ok, state, window, enabled, transform, config=config)
+def _exact_sub_fleet(costmap, idx, idx_ok, state, window, enabled, transform, *, config, mask, exact):
+  """The redo of an eager call's open robots: with `exact` the exact per-cell path (the reference),
+  else the fast path with its exact reruns in the program (what a jitted call runs; the tests hold
+  it to the exact path's integers)."""
+  return _filter_batch(costmap, mask, idx, idx_ok, state, window, enabled, transform, config=config, exact=exact)
 
 
 # The redo runs on a handful of robots, rarely: XLA:CPU's LLVM passes take ~4x longer on its exact
@@ -217,9 +224,9 @@ def _exact_sub_fleet(costmap, idx, idx_ok, state, window, enabled, transform, *,
 # no float semantics (no fast-math either way): the same integers, which
 # tests/jaxfilters/test_keepout_dispatch.py checks against the exact path.
 _EXACT_JITS = {
-    "cpu": jax.jit(_exact_sub_fleet, static_argnames=("config",),
+    "cpu": jax.jit(_exact_sub_fleet, static_argnames=("config", "exact"),
                    compiler_options={"xla_backend_optimization_level": 0}),
-    "other": jax.jit(_exact_sub_fleet, static_argnames=("config",)),
+    "other": jax.jit(_exact_sub_fleet, static_argnames=("config", "exact")),
 }
 
 

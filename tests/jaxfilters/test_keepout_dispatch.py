@@ -1,8 +1,9 @@
 """An eager keepout call picks its path on the host; a jitted one decides in the program.
 
 Eager (concrete inputs): the fast path runs with no exact redo in it and reports the
-robots whose float32 brackets were left open; only those are redone (with the jitted
-program, exact reruns in it) in a sub-fleet whose size is a power of two (plan.py). The results are
+robots whose float32 brackets were left open; only those are redone in a sub-fleet whose size is
+a power of two (plan.py): up to `process.EXACT_PATH_REDO_MAX` robots by the exact per-cell path
+itself (the cheaper compile), more by the jitted program with its exact reruns. The results are
 the exact path's integers, also on fleets built to put cell centres exactly on
 mask-cell edges. The CPU loop's programs hold no conditional: eager, nothing but the
 robot loop (none at all for one robot); jitted, the exact redo as loops of
@@ -77,6 +78,35 @@ def test_eager_call_redoes_the_open_robots_exactly(config):
   case = _edges()
   assert _needs(case, config).any()            # the fleet exercises the redo
   _assert_equal(_eager(case, config), _exact(case, config))
+
+
+@pytest.mark.parametrize("config", [PLAIN, ESCAPE], ids=["plain", "escape"])
+def test_a_larger_host_redo_runs_the_fast_path_with_its_exact_reruns(config, monkeypatch):
+  """Past EXACT_PATH_REDO_MAX open robots the host redo runs the jitted program (exact reruns in
+  it), not the exact path; the integers are the exact path's either way."""
+  if jax.default_backend() != "cpu":
+    pytest.skip("off a CPU the open robots are redone on the device, never on the host")
+  case = _edges()
+  monkeypatch.setattr(process, "HOST_REDO_MAX_FRACTION", 1.0)
+  monkeypatch.setattr(process, "EXACT_PATH_REDO_MAX", 0)
+  ran = []
+  real = process._exact_batch
+  monkeypatch.setattr(process, "_exact_batch", lambda *a, **k: ran.append(k["exact"]) or real(*a, **k))
+  _assert_equal(_eager(case, config), _exact(case, config))
+  assert ran == [False]
+
+
+@pytest.mark.parametrize("config", [PLAIN, ESCAPE], ids=["plain", "escape"])
+def test_a_small_host_redo_runs_the_exact_path(config, monkeypatch):
+  if jax.default_backend() != "cpu":
+    pytest.skip("off a CPU the open robots are redone on the device, never on the host")
+  case = _edges()
+  monkeypatch.setattr(process, "HOST_REDO_MAX_FRACTION", 1.0)
+  ran = []
+  real = process._exact_batch
+  monkeypatch.setattr(process, "_exact_batch", lambda *a, **k: ran.append(k["exact"]) or real(*a, **k))
+  _assert_equal(_eager(case, config), _exact(case, config))
+  assert ran == [True]
 
 
 @pytest.mark.parametrize("config", [PLAIN, ESCAPE], ids=["plain", "escape"])
