@@ -104,8 +104,9 @@ def register_fleet(sub) -> argparse.ArgumentParser:
     The `fleet` parser (its `func` default is `run_fleet`).
   """
   p = sub.add_parser("fleet", help="simulate a robot fleet in MJX with speed and keepout filters",
-                     description="Simulate a fleet of differential-drive robots in MJX. Every velocity "
-                     "command is clipped by the Nav2 speed filter and keepout zones are never entered.",
+                     description="Simulate a fleet of robots in MJX (the built-in base, or your own with --robot). "
+                     "Every velocity command is clipped by the Nav2 speed filter and keepout zones are never "
+                     "entered.",
                      epilog=_FLEET_EPILOG, formatter_class=argparse.RawDescriptionHelpFormatter)
   int_ = jcli.int_type
   p.add_argument("--robots", type=int_(1, MAX_ROBOTS), default=16,

@@ -115,7 +115,13 @@ class RobotModel:
     return m
 
   def configure(self, config):
-    """`config` (a FleetConfig) with the file's radius as `robot.radius`.
+    """`config` with the file's radius as `robot.radius` (what FleetEnv.create runs with).
+
+    Args:
+      config: a FleetConfig.
+
+    Returns:
+      The FleetConfig with robot.radius = self.radius; its other fields unchanged.
 
     Raises:
       ValueError: the FleetConfig refuses the radius (e.g. a local costmap too small for it).
