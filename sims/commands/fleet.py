@@ -7,6 +7,7 @@
         --mask keepout_filter_mask_server=warehouse_keepout.yaml \\
         --mask speed_filter_mask_server=warehouse_speed.yaml
     jaxfilters fleet --keepout-escape footprint --robots-in-keepout 4 --seconds 30   # Nav2 #6505
+    jaxfilters fleet --robot examples/robots/omni_base.xml --robots 8 --seconds 30   # your own base
 
 It writes OUT/summary.json, OUT/trajectories.png (map, zones, paths coloured
 by speed) and with --animate OUT/fleet.gif, and prints a summary table. Every
@@ -74,6 +75,7 @@ examples:
       --set KEEPOUT_ZONE_ENABLED=True --set SPEED_ZONE_ENABLED=True --out out/params
   jaxfilters fleet --keepout-escape footprint --robots-in-keepout 4 --seconds 30
   jaxfilters fleet --seconds 60 --bag out/bag --bag-costmaps 2   # open out/bag in Foxglove
+  jaxfilters fleet --robot examples/robots/diff_drive.xml --robots 8 --seconds 30   # your own base
 
 Maps, one of three sets (no option is ignored: a mix is refused):
   none of --map/--keepout/--speed/--params   the built-in warehouse (its speed zones are fixed)
@@ -102,8 +104,9 @@ def register_fleet(sub) -> argparse.ArgumentParser:
     The `fleet` parser (its `func` default is `run_fleet`).
   """
   p = sub.add_parser("fleet", help="simulate a robot fleet in MJX with speed and keepout filters",
-                     description="Simulate a fleet of differential-drive robots in MJX. Every velocity "
-                     "command is clipped by the Nav2 speed filter and keepout zones are never entered.",
+                     description="Simulate a fleet of robots in MJX (the built-in base, or your own with --robot). "
+                     "Every velocity command is clipped by the Nav2 speed filter and keepout zones are never "
+                     "entered.",
                      epilog=_FLEET_EPILOG, formatter_class=argparse.RawDescriptionHelpFormatter)
   int_ = jcli.int_type
   p.add_argument("--robots", type=int_(1, MAX_ROBOTS), default=16,
@@ -135,6 +138,11 @@ def register_fleet(sub) -> argparse.ArgumentParser:
                  "'center' is Nav2's centre-cell test, 'footprint' the footprint test (Nav2 #6505); the "
                  "planner then treats an inscribed cell under the robot as a collision, as Nav2's controllers "
                  "do (default off: Nav2's filter after inflation)")
+  p.add_argument("--robot", type=jcli.path_type, default=None, metavar="ROBOT.xml",
+                 help="your own base: an MJCF file with a body 'base', a site 'base_link', velocity actuators "
+                 "(v, no_slip, wz: differential drive; vx, vy, wz: omni) and its footprint radius "
+                 "(docs/guides/robots.md; e.g. examples/robots/diff_drive.xml); its radius replaces the "
+                 "built-in robot's 0.22 m everywhere (default: the built-in robot)")
   p.add_argument("--robots-in-keepout", type=int_(0, MAX_ROBOTS_PER_WORLD), default=0,
                  help="robots per world started with their footprint in a keepout zone (needs --keepout-escape)")
   b = p.add_argument_group("rosbag2 (MCAP) of the run, for Foxglove, RViz and PlotJuggler (needs the ros extra)")
@@ -181,8 +189,21 @@ def _check_fleet_args(args) -> None:
     raise CliError("--robots-in-keepout needs --keepout-escape center or footprint (without escape mode a "
                    "robot started in a zone is deadlocked)")
   scenario_args.check_map_args(args)
+  _check_robot_arg(args)
   _check_bag_args(args)
   jcli.check_creatable(Path(args.out))
+
+
+def _check_robot_arg(args) -> None:
+  """--robot read and checked against the interface (sims/fleet/robot.py): args.robot_model, or CliError."""
+  args.robot_model = None
+  if args.robot is None:
+    return
+  from sims.fleet.robot import RobotModelError, load_robot   # mujoco only: no simulator imports yet
+  try:
+    args.robot_model = load_robot(args.robot)
+  except RobotModelError as e:
+    raise CliError(f"--robot {e}") from None
 
 
 def _nested(a: Path, b: Path) -> bool:
@@ -328,6 +349,8 @@ def run_fleet(args) -> int:
     config = FleetConfig(robots_per_world=k, impl=args.impl, keepout_escape=args.keepout_escape,
                          robots_in_keepout=args.robots_in_keepout,
                          planner=PlannerConfig(inscribed_is_collision=escape))
+    if args.robot_model is not None:
+      config = args.robot_model.configure(config)
   except ValueError as e:
     raise CliError(str(e)) from None
   num_worlds = args.robots // k
@@ -342,7 +365,7 @@ def run_fleet(args) -> int:
         f"{total_steps * step_s:g} s simulated, device {jax.devices()[0].device_kind}", file=sys.stderr)
   t0 = time.perf_counter()
   try:
-    env = FleetEnv.create(scenario, config, seed=args.seed)
+    env = FleetEnv.create(scenario, config, seed=args.seed, robot=args.robot_model)
   except ValueError as e:      # the maps cannot host this fleet (mask resolution, free space)
     raise CliError(f"{scenario.name}: {e}") from None
   states = env.reset_fn(mesh=mesh)(env.params, env.world_keys(jax.random.PRNGKey(args.seed), num_worlds))
@@ -392,6 +415,8 @@ def run_fleet(args) -> int:
       "robots": args.robots, "robots_per_world": k, "worlds": num_worlds, "seed": args.seed,
       "controller_hz": config.controller_hz, "costmap_hz": config.costmap_hz,
       "physics_dt_s": config.physics_dt, "robot_radius_m": config.robot.radius,
+      "robot": None if args.robot_model is None else {"file": args.robot_model.name,
+                                                      "drive": args.robot_model.drive},
       "max_speed_mps": config.robot.max_speed, "max_accel_mps2": config.robot.max_accel,
       "local_costmap_m": config.local_costmap_size, "progress_timeout_s": config.progress_timeout,
       "impl": config.impl, "devices": 1 if mesh is None else int(mesh.devices.size),

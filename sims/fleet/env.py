@@ -1,8 +1,8 @@
 """The MJX fleet environment: one world's pure `reset(key)` / `step(state, action)`.
 
-A world is one warehouse with K = `robots_per_world` differential-drive robots
-(sims/assets/planar_robot.xml, one MJX model per robot, stepped with
-`jax.vmap` over K). Worlds are independent; a fleet of B = W * K robots is W
+A world is one warehouse with K = `robots_per_world` robots (the built-in
+sims/assets/planar_robot.xml, or your own MJCF base: sims/fleet/robot.py; one
+MJX model per robot, stepped with `jax.vmap` over K). Worlds are independent; a fleet of B = W * K robots is W
 worlds batched by one visible `jax.vmap` over `reset` and `step`
 (`FleetEnv.rollout_fn`), and rolled out with `lax.scan`.
 
@@ -33,7 +33,6 @@ from __future__ import annotations
 
 import dataclasses
 import functools
-from pathlib import Path
 
 import jax
 import jax.numpy as jnp
@@ -51,11 +50,11 @@ from jaxfilters.speed import SpeedState, speed_filter
 from jaxfilters.types import Costmap, pytree_dataclass
 from sims.fleet import local_costmap, metrics as metrics_lib, navigation, planner
 from sims.fleet.config import FleetConfig
+from sims.fleet.robot import ROBOT_XML, RobotModel, RobotModelError, load_builtin_model, planar_ctrl
 from sims.fleet.scenario import Scenario
 from sims.fleet.world import World, WorldParams, build_world
 
 _F32 = jnp.float32
-ROBOT_XML = Path(__file__).resolve().parents[1] / "assets" / "planar_robot.xml"
 
 
 @pytree_dataclass
@@ -148,7 +147,7 @@ def mjx_step(model: mjx.Model, data: mjx.Data, ctrl: jax.Array) -> mjx.Data:
   Args:
     model: the robot's mjx.Model.
     data: one robot's mjx.Data (qpos = x m, y m, yaw rad).
-    ctrl: float32 [3] velocity-actuator targets (vx m/s, vy m/s, yaw rate rad/s, world frame).
+    ctrl: float32 [nu] velocity-actuator targets (`sims.fleet.robot.planar_ctrl`).
 
   Returns:
     The mjx.Data one physics step (model timestep) later.
@@ -157,20 +156,10 @@ def mjx_step(model: mjx.Model, data: mjx.Data, ctrl: jax.Array) -> mjx.Data:
     return mjx.step(model, data.replace(ctrl=ctrl))
 
 
-def load_robot_model(config: FleetConfig) -> mujoco.MjModel:
-  """The shipped planar robot MJCF with the config's timestep and radius.
-
-  Args:
-    config: FleetConfig (physics_dt in s, robot.radius in m).
-
-  Returns:
-    A mujoco.MjModel of one robot (sims/assets/planar_robot.xml, contacts off).
-  """
-  m = mujoco.MjModel.from_xml_path(str(ROBOT_XML))
-  m.opt.timestep = config.physics_dt
-  gid = mujoco.mj_name2id(m, mujoco.mjtObj.mjOBJ_GEOM, "chassis")
-  m.geom_size[gid, 0] = config.robot.radius          # visual only: contacts are off
-  return m
+def load_robot_model(config: FleetConfig, robot: RobotModel | None = None) -> mujoco.MjModel:
+  """The robot's MjModel with the config's timestep: `robot`'s (sims/fleet/robot.py), or with None
+  the built-in sims/assets/planar_robot.xml (`ROBOT_XML`) drawn at the config's radius (contacts off)."""
+  return load_builtin_model(config) if robot is None else robot.mj_model(config.physics_dt)
 
 
 @dataclasses.dataclass(frozen=True, eq=False)
@@ -187,26 +176,31 @@ class FleetEnv:
     mjx_model: mjx.Model on the device.
     data0: mjx.Data template of one robot.
     params: WorldParams used by reset/step (the world's, or tracers inside jit).
+    robot: the RobotModel driven (sims/fleet/robot.py), or None for the built-in robot.
   """
   world: World
   mj_model: mujoco.MjModel
   mjx_model: mjx.Model
   data0: mjx.Data
   params: WorldParams
+  robot: RobotModel | None = None
 
   @classmethod
   def create(cls, scenario: Scenario | None = None, config: FleetConfig = FleetConfig(), *,
-             seed: int = 0) -> "FleetEnv":
+             seed: int = 0, robot: RobotModel | None = None) -> "FleetEnv":
     """Builds the world and the MJX model.
 
     Args:
       scenario: maps (default: the built-in warehouse).
       config: fleet configuration.
       seed: host seed for station and spawn selection.
+      robot: your own base (`sims.fleet.robot.load_robot`); its radius replaces
+        config.robot.radius (`env.config` shows it). None: the built-in robot.
 
     Raises:
       ValueError: impl 'warp' without a CUDA GPU or without warp-lang, or a
         scenario problem (see build_world).
+      RobotModelError: a robot that is not a RobotModel, smaller than the map's cells, or one MJX cannot run.
     """
     if config.impl == "warp" and not any(d.platform == "gpu" for d in jax.devices()):
       raise ValueError("FleetConfig.impl='warp' needs a CUDA GPU and warp-lang "
@@ -218,14 +212,23 @@ class FleetEnv:
         said = "; ".join(quiet_mjx.WARP_MESSAGES) or "warp not importable"
         raise ValueError(f"FleetConfig.impl='warp' needs warp-lang, which mujoco.mjx could not import "
                          f"({said}); pip install 'jaxfilters[warp]'")
-    world = build_world(scenario or Scenario.default(), config, seed=seed)
-    m = load_robot_model(config)
+    scenario = scenario or Scenario.default()
+    if robot is not None:
+      if not isinstance(robot, RobotModel):
+        raise RobotModelError(f"robot must be a RobotModel (sims.fleet.robot.load_robot); got {type(robot).__name__}")
+      robot.check_resolution(float(scenario.map.resolution))
+      config = robot.configure(config)
+    world = build_world(scenario, config, seed=seed)
+    m = load_robot_model(config, robot)
     # This process's first device: MJX's default, jax.devices()[0], belongs to process 0 in a
     # multi-process (jax.distributed) run, and other processes could not use its arrays.
     device = jax.local_devices()[0]
-    mx = mjx.put_model(m, impl=config.impl, device=device)
+    try:
+      mx = mjx.put_model(m, impl=config.impl, device=device)
+    except NotImplementedError as e:
+      raise RobotModelError(f"{robot.name if robot else ROBOT_XML}: MJX cannot run it ({e})") from None
     d0 = mjx.make_data(m, impl=config.impl, device=device)   # the MjModel form works for every impl
-    return cls(world=world, mj_model=m, mjx_model=mx, data0=d0, params=world.params)
+    return cls(world=world, mj_model=m, mjx_model=mx, data0=d0, params=world.params, robot=robot)
 
   @property
   def config(self) -> FleetConfig:
@@ -487,8 +490,7 @@ class FleetEnv:
 
     def substep(carry, j):
       data, m, in_k = carry
-      th = data.qpos[:, 2]
-      ctrl = jnp.stack([v * jnp.cos(th), v * jnp.sin(th), w], axis=1)
+      ctrl = planar_ctrl(self.robot, v, w, data.qpos[:, 2])
       xy0 = data.qpos[:, :2]
       data = jax.vmap(lambda d, u: mjx_step(self.mjx_model, d, u))(data, ctrl)
       xy = data.qpos[:, :2]

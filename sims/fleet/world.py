@@ -9,7 +9,7 @@
 2. a coarser navigation grid (`navigation.pool_costmap`) keeps every
    keepout, obstacle, inscribed and unknown cell blocked;
 3. goal stations (far from obstacles, in the largest connected free region,
-   spread by farthest-point sampling) and spawn points (free cells, >= 0.8 m apart);
+   spread by farthest-point sampling) and spawn points (free cells, `spawn_spacing` apart);
 4. the navigation field of every station (`navigation.distance_field`);
 5. a speed-zone table: zone 0 is "no limit" (mask value 0, off-mask or
    unknown), zones 1..Z-1 are the distinct limits of the speed mask;
@@ -45,7 +45,8 @@ from sims.fleet.config import FleetConfig
 from sims.fleet.scenario import Scenario, speed_limit_host
 
 STATIC_LAYER = StaticLayerConfig(track_unknown_space=True)
-SPAWN_SPACING = 0.8  # m, robots start at least this far apart (2 * 0.22 m radius + margin)
+SPAWN_SPACING = 0.8  # m, robots start at least this far apart (2 * 0.22 m radius + margin) ...
+SPAWN_GAP = 0.1      # m, ... or, for a larger robot, two radii and this gap apart (`spawn_spacing`)
 MAX_SPAWNS = 4096    # spawn points kept per map (robots sample without replacement)
 
 
@@ -155,6 +156,11 @@ class World:
   def num_zones(self) -> int:
     """Z, speed zones including zone 0 (no limit)."""
     return len(self.zone_labels)
+
+
+def spawn_spacing(config: FleetConfig) -> float:
+  """Metres between spawn points: SPAWN_SPACING, or 2 * radius + SPAWN_GAP for a robot too large for it."""
+  return max(SPAWN_SPACING, 2 * config.robot.radius + SPAWN_GAP)
 
 
 def keepout_inscribed_radius(resolution: float, config: FleetConfig) -> float:
@@ -443,9 +449,10 @@ def build_world(scenario: Scenario, config: FleetConfig, *, seed: int = 0) -> Wo
   # so a robot there is clear of obstacles and keepout) added. Nav2's small tb3_sandbox has
   # free space but little of it clear of the whole inflation radius.
   reachable = np.isfinite(reach[best])
+  spacing = spawn_spacing(config)
 
   def spaced(pts, chosen):
-    return spaced_points(pts[rng.permutation(len(pts))], chosen)
+    return spaced_points(pts[rng.permutation(len(pts))], chosen, spacing)
 
   def pick(cells, chosen):
     r, c = np.nonzero(cells)
@@ -465,15 +472,15 @@ def build_world(scenario: Scenario, config: FleetConfig, *, seed: int = 0) -> Wo
       zone_spawns = _zone_spawns(grid, keepout, walls, np.asarray(exit_dist[0]), factor, config, spaced)
       if len(zone_spawns) < config.robots_in_keepout:
         raise ValueError(f"the keepout zones have room for {len(zone_spawns)} robots started in them (footprint "
-                         f"on a lethal cell, clear of walls, a way out, {SPAWN_SPACING} m apart); need "
+                         f"on a lethal cell, clear of walls, a way out, {spacing:g} m apart); need "
                          f"robots_in_keepout = {config.robots_in_keepout}")
   chosen = pick(clear & reachable, zone_spawns.astype(np.float64))
   if len(chosen) - len(zone_spawns) < config.robots_per_world:
     chosen = pick(~blocked & ~clear & reachable & inside, chosen)
-  spawns = chosen[len(zone_spawns):].astype(np.float32)       # >= SPAWN_SPACING from every zone spawn
+  spawns = chosen[len(zone_spawns):].astype(np.float32)       # >= spacing from every zone spawn
   if len(spawns) < config.robots_per_world:
     raise ValueError(f"the map has room for {len(spawns)} robots per world (free cells clear of "
-                     f"obstacles and keepout, {SPAWN_SPACING} m apart); need robots_per_world = "
+                     f"obstacles and keepout, {spacing:g} m apart); need robots_per_world = "
                      f"{config.robots_per_world}: use fewer robots per world")
 
   n = int(round(config.local_costmap_size / res))

@@ -94,6 +94,7 @@ from sims.rl.task import NavTask
 from sims.rl.kernels import clip_command
 from sims.fleet.config import FleetConfig
 from sims.fleet.env import ROBOT_XML, FleetEnv, WorldState, mjx_step
+from sims.fleet.robot import RobotModel, planar_ctrl
 from sims.fleet.scenario import Scenario
 from sims.fleet.layouts import LayoutBank, LayoutConfig, bank_from_worlds, layout_worlds
 from sims.fleet.world import STATIC_LAYER
@@ -261,7 +262,8 @@ class NavEnv(mjx_env.MjxEnv):
   @classmethod
   def create(cls, scenario: Scenario | None = None, fleet_config: FleetConfig | None = None,
              config: NavEnvConfig = NavEnvConfig(), *, seed: int = 0, layouts: int = 1,
-             layout_seed: int = 0, layout_config: LayoutConfig = LayoutConfig()) -> "NavEnv":
+             layout_seed: int = 0, layout_config: LayoutConfig = LayoutConfig(),
+             robot: RobotModel | None = None) -> "NavEnv":
     """Builds the world (as `FleetEnv.create`), the bank of zone layouts and the env.
 
     Args:
@@ -275,11 +277,13 @@ class NavEnv(mjx_env.MjxEnv):
       layout_seed: host seed of the random layouts (different seeds give layouts never seen
         with another).
       layout_config: how random layouts are drawn.
+      robot: your own base (`sims.fleet.robot.load_robot`, as `FleetEnv.create`): its radius
+        replaces fleet_config.robot.radius. None: the built-in robot.
 
     Raises:
       ValueError: a bad config or scenario (see FleetEnv.create, build_world), layouts < 1,
         layouts > 1 in navigation mode, or a scenario with an AsymmetricInflationLayer
-        (`check_layers`).
+        (`check_layers`); RobotModelError (a ValueError) for a robot the fleet refuses.
       TypeError: config of the wrong type.
     """
     if not isinstance(config, NavEnvConfig):
@@ -293,7 +297,7 @@ class NavEnv(mjx_env.MjxEnv):
       raise ValueError(f"layouts must be at most {MAX_LAYOUTS} (each is a world built on the host); got {layouts!r}")
     if scenario is not None:
       check_layers(scenario)          # before the world is built
-    fleet = FleetEnv.create(scenario, fleet_config, seed=seed)
+    fleet = FleetEnv.create(scenario, fleet_config, seed=seed, robot=robot)
     if layouts == 1:
       return cls(fleet, config)
     if config.mode != "velocity":
@@ -308,7 +312,7 @@ class NavEnv(mjx_env.MjxEnv):
 
   @property
   def xml_path(self) -> str:
-    return str(ROBOT_XML)
+    return str(ROBOT_XML) if self._fleet.robot is None else self._fleet.robot.name
 
   @property
   def mj_model(self) -> mujoco.MjModel:
@@ -513,8 +517,7 @@ class NavEnv(mjx_env.MjxEnv):
 
       def substep(c, _):
         data, in_k, entries, collide, over, late_s, crossed, outside = c
-        th = data.qpos[:, 2]
-        ctrl = jnp.stack([v * jnp.cos(th), v * jnp.sin(th), w], axis=1)
+        ctrl = planar_ctrl(self._fleet.robot, v, w, data.qpos[:, 2])
         data = jax.vmap(lambda d, u: mjx_step(model, d, u))(data, ctrl)
         xy = data.qpos[:, :2]
         kin = kernels.keepout_cost(task, xy) >= constants.INSCRIBED_INFLATED_OBSTACLE

@@ -62,7 +62,7 @@ from PIL import Image
 
 from jaxfilters.grid import OccupancyGrid
 from jaxfilters.map_io import load_map, load_map_image
-from tests.fuzz import fuzz_actions, fuzz_jaus, fuzz_params, fuzz_policy, fuzz_poses
+from tests.fuzz import fuzz_actions, fuzz_jaus, fuzz_params, fuzz_policy, fuzz_poses, fuzz_robot
 
 OK_OUTCOMES = ("loaded", "ValueError", "FileNotFoundError")
 MAX_MESSAGE = 1000
@@ -514,6 +514,7 @@ TARGETS: dict[str, Target] = {
     "policy-msgpack": Target(fuzz_policy.run_msgpack, lambda: [Seed(d) for d in fuzz_policy.msgpack_seeds()],
                              fuzz_policy.msgpack_edit),
     "gym-actions": Target(fuzz_actions.run, lambda: [Seed(d) for d in fuzz_actions.seeds()], fuzz_actions.edit),
+    "robot": Target(fuzz_robot.run, lambda: [Seed(d) for d in fuzz_robot.seeds()], fuzz_robot.edit),
 }
 
 

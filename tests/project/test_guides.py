@@ -15,7 +15,7 @@ ELSEWHERE = {"rl.md"}                          # its snippets need the rl extra:
 
 def test_every_guide_with_code_is_run_somewhere():
   with_code = {p.name for p in GUIDES.glob("*.md") if python_blocks(p.read_text())}
-  assert with_code == {"tour.md", "beyond_nav2.md"} | ELSEWHERE, with_code
+  assert with_code == {"tour.md", "beyond_nav2.md", "robots.md"} | ELSEWHERE, with_code
 
 
 def test_tour_snippets(monkeypatch):
@@ -33,7 +33,7 @@ def test_tour_snippets(monkeypatch):
   assert next(sc for sc in scopes if "frames" in sc)["frames"].pose.shape[0] == 50
 
 
-@pytest.mark.parametrize("page", ["beyond_nav2.md"])
+@pytest.mark.parametrize("page", ["beyond_nav2.md", "robots.md"])
 def test_guide_snippets_with_their_own_asserts(page, monkeypatch):
   monkeypatch.chdir(REPO)
   assert run_page(GUIDES / page)          # the snippets assert what the page claims
