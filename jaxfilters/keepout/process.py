@@ -111,7 +111,7 @@ def keepout_filter(costmap: Costmap, mask: FilterMask, poses, state: KeepoutStat
     if state.error is None:
       state = dataclasses.replace(state, error=np.zeros((costmap.num_robots,), bool))
     sub = jax.tree.map(lambda x: np.asarray(x)[sel], (costmap, idx, idx_ok, state, window, enabled, transform))
-    sub_out, sub_state = _exact_batch(*sub, mask=mask, config=config, exact=size <= EXACT_PATH_REDO_MAX)
+    sub_out, sub_state = exact_redo(*sub, mask=mask, config=config, exact=size <= EXACT_PATH_REDO_MAX)
     # The padding slots (robot redo[0] again) are dropped.
     out, new_state = jax.tree.map(lambda x, v: _put(x, v, redo), (out, new_state), (sub_out, sub_state))
   return out, new_state
@@ -230,7 +230,9 @@ _EXACT_JITS = {
 }
 
 
-def _exact_batch(*args, **kw):
+def exact_redo(*args, **kw):
+  """The host redo of an eager call's open robots (a sub-fleet of NumPy inputs): `_exact_sub_fleet`
+  jitted for this backend (at XLA optimisation level 0 on a CPU)."""
   return _EXACT_JITS["cpu" if jax.default_backend() == "cpu" else "other"](*args, **kw)
 
 

@@ -90,8 +90,8 @@ def test_a_larger_host_redo_runs_the_fast_path_with_its_exact_reruns(config, mon
   monkeypatch.setattr(process, "HOST_REDO_MAX_FRACTION", 1.0)
   monkeypatch.setattr(process, "EXACT_PATH_REDO_MAX", 0)
   ran = []
-  real = process._exact_batch
-  monkeypatch.setattr(process, "_exact_batch", lambda *a, **k: ran.append(k["exact"]) or real(*a, **k))
+  real = process.exact_redo
+  monkeypatch.setattr(process, "exact_redo", lambda *a, **k: ran.append(k["exact"]) or real(*a, **k))
   _assert_equal(_eager(case, config), _exact(case, config))
   assert ran == [False]
 
@@ -103,8 +103,8 @@ def test_a_small_host_redo_runs_the_exact_path(config, monkeypatch):
   case = _edges()
   monkeypatch.setattr(process, "HOST_REDO_MAX_FRACTION", 1.0)
   ran = []
-  real = process._exact_batch
-  monkeypatch.setattr(process, "_exact_batch", lambda *a, **k: ran.append(k["exact"]) or real(*a, **k))
+  real = process.exact_redo
+  monkeypatch.setattr(process, "exact_redo", lambda *a, **k: ran.append(k["exact"]) or real(*a, **k))
   _assert_equal(_eager(case, config), _exact(case, config))
   assert ran == [True]
 
