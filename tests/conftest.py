@@ -76,7 +76,8 @@ SLOW_FILES = ("project/test_notebooks.py", "scale/test_sharding.py", "commands/t
               "commands/test_cli_matrix.py", "jaxfilters/test_keepout_pallas.py", "commands/test_fleet.py",
               "jaxfilters/test_shapes.py", "rl/test_layouts.py", "rl/test_gym.py",
               "jaxfilters/test_keepout_footprint.py", "fuzz/test_map_files.py", "rl/test_brax_ppo.py",
-              "rl/test_registry.py", "fleet/test_one_way_lanes.py", "fleet/test_fleet_layers.py")
+              "rl/test_registry.py", "fleet/test_one_way_lanes.py", "fleet/test_fleet_layers.py",
+              "commands/test_rl_fleet.py", "rl/test_fleet_policy.py")
 TESTS = Path(__file__).resolve().parent
 
 
