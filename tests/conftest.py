@@ -77,7 +77,8 @@ SLOW_FILES = ("project/test_notebooks.py", "scale/test_sharding.py", "commands/t
               "jaxfilters/test_shapes.py", "rl/test_layouts.py", "rl/test_gym.py",
               "jaxfilters/test_keepout_footprint.py", "fuzz/test_map_files.py", "rl/test_brax_ppo.py",
               "rl/test_registry.py", "fleet/test_one_way_lanes.py", "fleet/test_fleet_layers.py",
-              "fleet/test_robot_model.py", "rl/test_own_robot.py", "commands/test_fleet_robot.py")
+              "fleet/test_robot_model.py", "rl/test_own_robot.py", "commands/test_fleet_robot.py",
+              "commands/test_rl_fleet.py", "rl/test_fleet_policy.py")
 TESTS = Path(__file__).resolve().parent
 
 

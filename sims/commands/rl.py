@@ -19,6 +19,10 @@ table, or one JSON object with --json. Rule breaks (keepout entries,
 collisions, time above a speed limit) are reported, not turned into exit
 code 3: the command measures a policy, and a script reads its JSON.
 
+`train --robots-per-world K` trains one policy shared by every robot of worlds of K robots
+(`NavEnvConfig(agents="per_robot")`, `sims.rl.fleet`); `eval --robots-per-world K` runs such a
+policy at any K and reports per robot-episode figures.
+
 Registered into the library's CLI through the `jaxfilters.commands`
 entry-point group (pyproject.toml). Every option is checked before anything
 is built (exit 2, one line).
@@ -58,12 +62,14 @@ MAX_LAYOUTS = 1024               # each layout is a world built on the host (abo
 MAX_EVALS = 1000                 # evaluation points, each a host round trip and a curve point
 MAX_EVAL_EPISODES = 2 ** 18      # episodes run at once on one device (--num-eval, --episodes)
 MAX_DEVICES = 4096
+MAX_ROBOTS = 64                  # --robots-per-world: sims.rl.policy.MAX_ROBOTS, what a policy file may record
 
 _TRAIN_EPILOG = """\
 examples:
   jaxfilters rl train --timesteps 400000 --out out/ppo
   jaxfilters rl train --timesteps 3000000 --num-envs 64 --num-steps 64 --randomize --out out/ppo3m
   jaxfilters rl train --timesteps 50000000 --num-envs 8192 --devices all --randomize --out out/big
+  jaxfilters rl train --robots-per-world 8 --timesteps 2000000 --num-envs 1024 --randomize --out out/fleet
 
 --timesteps is rounded up to whole PPO iterations (--num-envs x --num-steps env steps each), split
 into --evals training calls as equal as whole iterations allow (--evals at most the iterations), with
@@ -77,6 +83,7 @@ or output folder (one line on stderr, nothing run)"""
 _EVAL_EPILOG = f"""\
 examples:
   jaxfilters rl eval --policy out/pol --episodes 256 --seed 7 --randomize --json
+  jaxfilters rl eval --policy out/fleet --robots-per-world 32 --episodes 64 --seed 7 --randomize --json
   jaxfilters rl eval --policy out/pol --episodes 64 --seed 1 --map warehouse.yaml \\
       --keepout warehouse_keepout.yaml --speed warehouse_speed.yaml
   jaxfilters rl eval --policy out/pol --episodes 64 --seed 1 --map warehouse.yaml --params nav2_params.yaml \\
@@ -100,7 +107,12 @@ speed_excess_outside_entry_s (total seconds above the limit in force outside the
 which a slower zone is entered: 0 when the clip holds from the tick after each entry), bad_action_steps
 (steps whose action had a NaN, replaced by 0 in the env: 0 for a sound policy; a policy whose actions
 are not finite on the episodes' first observations is refused, exit 2), mean_return, clipped_per_episode (m of command the speed filter clipped),
-steps_per_episode, policy, seed, map, params, randomize, episode_length, device, wall_s.
+steps_per_episode, policy, seed, map, params, randomize, episode_length, device, wall_s. A policy
+trained with --robots-per-world runs one episode on each of --episodes worlds of --robots-per-world
+robots (any K; each robot's first episode is counted, the robot respawned after it ends so the
+others keep K robots around them), every figure above is per robot-episode, and robots_per_world,
+robot_episodes, robot_collisions (robot-robot contacts, total) and
+robot_collisions_per_robot_episode are added.
 
 exit codes: 0 ok (rule breaks are reported, not an exit code), 1 internal error (a bug;
 JAXFILTERS_DEBUG=1 shows the traceback), 2 bad option, policy or map file (one line on stderr,
@@ -156,6 +168,13 @@ def register_rl(sub) -> argparse.ArgumentParser:
   t.add_argument("--layouts", type=int_(1, MAX_LAYOUTS), default=16,
                  help=f"zone layouts with --randomize, the map's own first, 1 to {MAX_LAYOUTS:,d} (each is a "
                  "world built on the host; default 16)")
+  t.add_argument("--robots-per-world", type=int_(1, MAX_ROBOTS), default=None, metavar="K",
+                 help=f"train one policy shared by every robot of worlds of K robots, 1 to {MAX_ROBOTS}: each robot "
+                 "is an agent with its own observation (98 values, the nearest robot included), reward and done; "
+                 "a robot whose episode ends is respawned while its world goes on, and robot-robot contacts are "
+                 "penalised and counted (sims.rl.agents). --num-envs then counts worlds, --timesteps world steps, "
+                 "and --num-envs x K x --num-steps robot-steps per PPO iteration. rl eval runs the policy at any "
+                 "K (default: no flag, one robot per env and the env is the agent)")
   t.add_argument("--devices", default=None, metavar="N|all",
                  help=f"shard the env batch over the first N devices (1 to {MAX_DEVICES:,d}) or all; --num-envs "
                  "must be a multiple (default: one device)")
@@ -183,6 +202,10 @@ def register_rl(sub) -> argparse.ArgumentParser:
                  "layouts seeded by --seed (never the layouts `rl train --seed` drew)")
   e.add_argument("--layouts", type=int_(1, MAX_LAYOUTS), default=16,
                  help=f"zone layouts with --randomize, the map's own first, 1 to {MAX_LAYOUTS:,d} (default 16)")
+  e.add_argument("--robots-per-world", type=int_(1, MAX_ROBOTS), default=None, metavar="K",
+                 help=f"robots per world, 1 to {MAX_ROBOTS}, for a policy trained with rl train --robots-per-world "
+                 "(any K: the figures are then per robot-episode); a policy of one agent per env runs only at "
+                 "the K it was trained with (default: the policy's K)")
   e.add_argument("--episode-length", type=int_(1, MAX_EPISODE_LENGTH), default=None,
                  help=f"env steps of 0.2 s per episode, 1 to {MAX_EPISODE_LENGTH:,d} (default: the policy's "
                  "training episode length)")
@@ -246,6 +269,23 @@ def check_batch(num_envs: int, num_steps: int) -> None:
                    f"rows); got {num_envs} x {num_steps} = {num_envs * num_steps:,d}")
 
 
+def check_robot_batch(args, robots: int) -> None:
+  """rl train --robots-per-world K: the rollout's robot rows (--num-envs x K x --num-steps) at most
+  MAX_BATCH and split by --minibatches, and no --devices (one device trains the per-robot policy); else
+  CliError."""
+  rows = args.num_envs * robots * args.num_steps
+  if rows > MAX_BATCH:
+    raise CliError(f"--num-envs x --robots-per-world x --num-steps must be at most 2**26 = {MAX_BATCH:,d} (the "
+                   f"rollout buffer's rows, one per robot); got {args.num_envs} x {robots} x {args.num_steps} = "
+                   f"{rows:,d}")
+  if rows % args.minibatches:
+    raise CliError(f"--minibatches ({args.minibatches}) must divide --num-envs x --robots-per-world x --num-steps "
+                   f"({rows}): every robot-step is a sample")
+  if args.devices is not None:
+    raise CliError("--devices with --robots-per-world: the per-robot policy trains on one device (the worlds "
+                   "are not sharded yet); leave out --devices")
+
+
 def _check_device_minibatches(args, n_dev: int) -> None:
   if (args.num_envs // n_dev * args.num_steps) % args.minibatches:
     raise CliError(f"--minibatches ({args.minibatches}) must divide each device's batch, --num-envs / "
@@ -292,7 +332,8 @@ def _progress_line(point: dict, total: int) -> str:
           f"{point['steps_per_s']:>10,.0f} steps/s  return {point['return']:8.2f}  "
           f"success {100 * point['success']:5.1f}%  goals/episode {point['goals_reached']:5.2f}  "
           f"keepout entries {point['keepout_entries']:.3f}  collisions {point['collisions']:.3f}  "
-          f"speed-excess {point['speed_violation_s']:.3f} s")
+          f"speed-excess {point['speed_violation_s']:.3f} s"
+          + (f"  robot collisions {point['robot_collisions']:.3f}" if "robot_collisions" in point else ""))
 
 
 def run_train(args) -> int:
@@ -307,18 +348,27 @@ def run_train(args) -> int:
   _check_seed(args.seed)
   hidden = parse_hidden(args.hidden)
   check_batch(args.num_envs, args.num_steps)
-  if (args.num_envs * args.num_steps) % args.minibatches:
-    raise CliError(f"--minibatches ({args.minibatches}) must divide --num-envs x --num-steps "
-                   f"({args.num_envs * args.num_steps})")
+  robots = args.robots_per_world
+  if robots is None:
+    if (args.num_envs * args.num_steps) % args.minibatches:
+      raise CliError(f"--minibatches ({args.minibatches}) must divide --num-envs x --num-steps "
+                     f"({args.num_envs * args.num_steps})")
+  else:
+    check_robot_batch(args, robots)
   devices = parse_devices(args.devices, args.num_envs)
   if isinstance(devices, int):
     _check_device_minibatches(args, devices)
-  from sims.rl.ppo import plan_training
+  from sims.rl.ppo import MAX_ENV_STEPS, plan_training
   try:
     calls = plan_training(args.timesteps, args.num_envs, args.num_steps, args.evals)
   except ValueError as e:
     raise CliError(f"--timesteps {args.timesteps} --evals {args.evals} --num-envs {args.num_envs} "
                    f"--num-steps {args.num_steps}: {e}") from None
+  if robots is not None and sum(calls) * args.num_envs * args.num_steps * robots > MAX_ENV_STEPS:
+    raise CliError(f"--timesteps {args.timesteps} rounded up to whole PPO iterations is "
+                   f"{sum(calls) * args.num_envs * args.num_steps:,d} world steps, x --robots-per-world {robots} = "
+                   f"{sum(calls) * args.num_envs * args.num_steps * robots:,d} robot-steps, above {MAX_ENV_STEPS:,d} "
+                   "(the trainer counts robot-steps in an int32)")
   out = Path(args.out)
   check_out_dir(out, args.overwrite)
 
@@ -343,16 +393,27 @@ def run_train(args) -> int:
   from sims.rl.env import NavEnvConfig
 
   env, fn = training_env(None, randomize=args.randomize, seed=args.seed, layouts=args.layouts,
-                         config=NavEnvConfig(keepout=args.keepout, costmap_stop=args.costmap_stop))
-  adapter = GymnaxAdapter(env, args.episode_length, fn, full_reset=args.randomize)
+                         robots_per_world=robots or 1,
+                         config=NavEnvConfig(keepout=args.keepout, costmap_stop=args.costmap_stop,
+                                             agents="world" if robots is None else "per_robot"))
   per_iter = args.num_envs * args.num_steps
-  algo = make_ppo(adapter, timesteps_per_call=per_iter, num_envs=args.num_envs,
-                  num_steps=args.num_steps, num_minibatches=args.minibatches, hidden=hidden)
+  evaluate = {}
+  if robots is None:
+    adapter = GymnaxAdapter(env, args.episode_length, fn, full_reset=args.randomize)
+    algo = make_ppo(adapter, timesteps_per_call=per_iter, num_envs=args.num_envs,
+                    num_steps=args.num_steps, num_minibatches=args.minibatches, hidden=hidden)
+  else:
+    from sims.rl.fleet import FleetAdapter, evaluate_fleet_policy, make_fleet_ppo
+    adapter = FleetAdapter(env, args.episode_length, fn, full_reset=args.randomize)
+    algo = make_fleet_ppo(adapter, num_worlds=args.num_envs, num_steps=args.num_steps,
+                          num_minibatches=args.minibatches, hidden=hidden)
+    evaluate = {"evaluate": evaluate_fleet_policy}
   planned = sum(calls) * per_iter
   sizes = f"{calls[0]}" if len(set(calls)) == 1 else f"{calls[0]} or {calls[-1]}"
   dev = jax.devices()[0]
+  agents = "" if robots is None else f", one agent per robot of {robots} per world ({planned * robots:,d} robot-steps)"
   print(f"jaxfilters rl train: PPO (rejax) on NavEnv, {planned:,d} env steps ({len(calls)} calls of {sizes} "
-        f"iterations of {args.num_envs} envs x {args.num_steps} steps), "
+        f"iterations of {args.num_envs} envs x {args.num_steps} steps{agents}), "
         f"{'randomised' if args.randomize else 'fixed'} zones and goals, {n_dev} x {dev.device_kind}; compiling",
         file=sys.stderr, flush=True)
 
@@ -360,12 +421,12 @@ def run_train(args) -> int:
     print(_progress_line(point, planned), file=sys.stderr, flush=True)
 
   ts, evals, timing = train_with_curve(adapter, algo, jax.random.PRNGKey(args.seed), calls=calls,
-                                       num_eval=args.num_eval, callback=progress, mesh=mesh)
+                                       num_eval=args.num_eval, callback=progress, mesh=mesh, **evaluate)
   steps = int(evals["env_steps"][-1])          # counted on the device (the train state's global_step)
   final = {k: v[-1] for k, v in evals.items()}
   per_env = getattr(ts.last_obs.sharding, "spec", None)     # the env batch's sharding after training
   placement = {"env_batch": None if per_env is None else [None if a is None else str(a) for a in per_env],
-               "envs_per_device": int(ts.last_obs.addressable_shards[0].data.shape[0])}
+               "envs_per_device": int(ts.last_obs.addressable_shards[0].data.shape[0]) // (robots or 1)}
   if mesh is not None:
     # Data-parallel PPO keeps the networks identical on every device; a difference is a bug.
     placement["replicas_identical"] = replicas_identical(ts)
@@ -393,7 +454,7 @@ def run_train(args) -> int:
                    f"{timing['train_s']:.0f} s")
   print(f"compile {compile_s:.1f} s, train {timing['train_s']:.1f} s "
         f"({result['timing']['env_steps_per_s'] or 0:,.0f} env steps/s), wall {wall:.1f} s")
-  for name in EVAL_KEYS:
+  for name in (*EVAL_KEYS, *(("robot_collisions",) if robots else ())):
     print(f"  {name:<18} start {result['initial'][name]:9.3f}   end {final[name]:9.3f}")
   print(f"wrote {out / 'policy.json'}, {out / 'policy.msgpack'}, {out / 'results.json'}, {png}")
   return EXIT_OK
@@ -404,7 +465,7 @@ def run_train(args) -> int:
 # evaluate_policy's per-episode metrics other than the headline ones, by their output name (a metric
 # not named here is reported as NAME_per_episode).
 _HEADLINE = ("success", "goals_reached", "keepout_entries", "collisions", "speed_violation_s",
-             "speed_violation_after_clip_s", "speed_violation_outside_entry_s", "bad_action")
+             "speed_violation_after_clip_s", "speed_violation_outside_entry_s", "bad_action", "robot_collisions")
 _OTHER_METRICS = {"return": "mean_return", "clipped": "clipped_per_episode", "length": "steps_per_episode",
                   "costmap_stops": "costmap_stops_per_episode"}
 
@@ -424,6 +485,12 @@ def run_eval(args) -> int:
     policy = load_policy(args.policy)
   except PolicyError as e:
     raise CliError(f"--policy: {str(e).splitlines()[0]}") from None
+  per_robot = policy.env_config.agents == "per_robot"
+  robots = args.robots_per_world or policy.robots_per_world
+  if not per_robot and robots != policy.robots_per_world:
+    raise CliError(f"--robots-per-world {robots}: the policy at {args.policy} drives a world of "
+                   f"{policy.robots_per_world} robot(s) as one agent (trained without --robots-per-world) and runs "
+                   "only at that number")
   scenario = scenario_args.scenario_from_args(args, "rl eval", "the RL env")
 
   import jax
@@ -433,10 +500,10 @@ def run_eval(args) -> int:
   from sims.rl.randomization import training_env
   try:
     env, fn = training_env(scenario, randomize=args.randomize, seed=args.seed, config=policy.env_config,
-                           layouts=args.layouts, evaluation=True)
+                           layouts=args.layouts, evaluation=True, robots_per_world=robots)
   except ValueError as e:      # the maps cannot host the env (mask resolution, free space)
     raise CliError(f"{scenario.name}: {str(e).splitlines()[0]}") from None
-  if env.num_robots != policy.robots_per_world:
+  if not per_robot and env.num_robots != policy.robots_per_world:
     raise CliError(f"--policy {args.policy}: trained with {policy.robots_per_world} robots per world; "
                    f"the env has {env.num_robots}")
   if env.observation_size != policy.observation_size or env.action_size != policy.action_size:
@@ -444,7 +511,13 @@ def run_eval(args) -> int:
                    f"values and gives actions of {policy.action_size}; this env's are {env.observation_size} "
                    f"and {env.action_size} (trained with another observation)")
   length = args.episode_length or policy.episode_length
-  adapter = GymnaxAdapter(env, length, fn, full_reset=args.randomize)
+  if per_robot:
+    from sims.rl.fleet import FleetAdapter
+    from sims.rl.fleet import evaluate_fleet_policy as evaluate
+    adapter = FleetAdapter(env, length, fn, full_reset=args.randomize)
+  else:
+    evaluate = evaluate_policy
+    adapter = GymnaxAdapter(env, length, fn, full_reset=args.randomize)
   key = jax.random.PRNGKey(args.seed)
   # The first observations of the episodes about to run: a policy whose (unclipped) mean action is
   # NaN or inf there has weights that overflow float32; the env would zero its NaN actions and the
@@ -455,8 +528,7 @@ def run_eval(args) -> int:
                    f"{int((~finite).sum())} of the {args.episodes} episodes' first observations (its weights "
                    "overflow float32); nothing evaluated")
   with jax.numpy_rank_promotion("allow"):
-    per_episode = jax.jit(lambda k: evaluate_policy(adapter, policy.act, k, args.episodes))(
-        key)
+    per_episode = jax.jit(lambda k: evaluate(adapter, policy.act, k, args.episodes))(key)
   m = {k: np.asarray(v, np.float64) for k, v in jax.device_get(per_episode).items()}
   result = {
       "episodes": args.episodes,
@@ -478,12 +550,18 @@ def run_eval(args) -> int:
       "policy": str(args.policy), "seed": args.seed, "map": scenario_args.map_label(args),
       "params": None if args.params is None else str(args.params), "randomize": bool(args.randomize),
       "episode_length": length, "device": jax.devices()[0].device_kind,
-      "wall_s": time.perf_counter() - t_start,
   }
+  if per_robot:     # each figure above is per robot-episode (each robot's first episode in each world)
+    result.update(robots_per_world=robots, robot_episodes=int(m["success"].size),
+                  robot_collisions=int(np.rint(m["robot_collisions"].sum())),
+                  robot_collisions_per_robot_episode=float(m["robot_collisions"].mean()))
+  result["wall_s"] = time.perf_counter() - t_start
   if args.json:
     print(json.dumps(_finite(result)))
     return EXIT_OK
-  print(f"{scenario.name}: {args.episodes} episodes of up to {length} steps, seed {args.seed}, "
+  what = f"{args.episodes} worlds of {robots} robots ({args.episodes * robots} robot-episodes)" if per_robot else \
+      f"{args.episodes} episodes"
+  print(f"{scenario.name}: {what} of up to {length} steps, seed {args.seed}, "
         f"{'randomised' if args.randomize else 'fixed'} zones and goals ({result['device']}, "
         f"{result['wall_s']:.1f} s)")
   rows = (("success", f"{100 * result['success']:.1f} % of episodes reached a goal"),
@@ -495,6 +573,9 @@ def run_eval(args) -> int:
           ("mean return", f"{result['mean_return']:.3f}"),
           ("clipped command", f"{result['clipped_per_episode']:.4f} m per episode"),
           ("steps per episode", f"{result['steps_per_episode']:.1f}"))
+  if per_robot:
+    rows += (("robot collisions", (f"{result['robot_collisions']} in all, "
+                                   f"{result['robot_collisions_per_robot_episode']:.4f} per robot-episode")),)
   for name, value in rows:
     print(f"  {name:<18} {value}")
   return EXIT_OK

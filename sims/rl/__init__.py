@@ -1,8 +1,10 @@
 """Reinforcement learning on the fleet: MuJoCo Playground's env contract, PPO, policy files, Gymnasium.
 
 Rooms: `env` (NavEnv, NavEnvConfig, NavModel: Playground's MjxEnv), `task` (NavTask, the data every
-step reads), `kernels` (the env's per-step kernels), `randomization` (zones and goals drawn per
+step reads), `kernels` (the env's per-step kernels), `observation` (what a robot observes), `agents`
+(one agent per robot: robot-robot contacts, respawns), `randomization` (zones and goals drawn per
 env), `adapter` (the env as a gymnax environment for rejax), `ppo` (training and evaluation),
+`fleet` (one policy shared by every robot of a world: its adapter, PPO and evaluation),
 `policy` (policy files), `gym` (Gymnasium's Env and VectorEnv; needs the `rl` extra), `registry`
 (the envs by name: Playground's `load`/`get_default_config`, Gymnasium ids), `brax_compat` (Brax's
 own PPO on this jax).

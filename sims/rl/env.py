@@ -13,6 +13,11 @@ default), built from the same `World` as `sims.fleet.env.FleetEnv`. One env step
 one local-costmap period (1 / costmap_hz, 0.2 s): `ticks_per_step` controller
 ticks (20 Hz) of `substeps_per_tick` physics steps each.
 
+Agents (`NavEnvConfig.agents`): "world" (the default, described below) makes the env one
+agent; "per_robot" makes each robot an agent driven by one shared policy: obs [K, 98],
+action [K, 2], reward, done and metrics [K], robot-robot contacts counted and penalised, a
+robot respawned when its episode ends (`sims.rl.agents`).
+
 Two modes (`NavEnvConfig.mode`):
 
 * `"velocity"`: the action is float32 [2K], each robot's (v, w) in [-1, 1]
@@ -89,7 +94,8 @@ from jaxfilters.inflation import inflate
 from jaxfilters.speed import SpeedState, speed_filter
 from jaxfilters.static_layer import static_layer
 from sims.fleet import navigation, planner, topk
-from sims.rl import kernels
+from sims.rl import agents, kernels, observation
+from sims.rl.observation import AHEAD
 from sims.rl.task import NavTask
 from sims.rl.kernels import clip_command
 from sims.fleet.config import FleetConfig
@@ -102,8 +108,8 @@ from sims.fleet.world import STATIC_LAYER
 _F32 = jnp.float32
 MODES = ("velocity", "navigation")
 KEEPOUT_MODES = ("terminate", "penalty")
+AGENTS = ("world", "per_robot")
 MAX_LAYOUTS = 1024         # zone layouts in a bank: each is a world built on the host, with map-sized masks
-AHEAD = (0.25, 0.5, 1.0)   # m, points ahead where the observation reads the speed limit
 State = mjx_env.State
 
 
@@ -141,7 +147,12 @@ class NavEnvConfig:
       0.1 m (turning stays free; `rl_kernels.costmap_stop`), the costmap check a Nav2
       controller applies to its own trajectories; metrics["costmap_stops"] counts the stopped
       robot-ticks. False: the policy alone keeps out (entries and collisions are counted and
-      penalised).
+      penalised). With agents "per_robot" it also stops a robot before another robot's disc.
+    agents: "world": one agent per env (the K robots' observations concatenated [K * 98], action
+      [2K], reward summed, done when one robot's episode ends); "per_robot" (velocity mode only):
+      one agent per robot driven by one shared policy (`sims.rl.agents`): obs [K, 98], action
+      [K, 2], reward, done and metrics [K]; a robot whose episode ends is respawned while the
+      world goes on; a robot-robot contact ends both robots' episodes.
   """
   mode: str = "velocity"
   keepout: str = "terminate"
@@ -157,12 +168,16 @@ class NavEnvConfig:
   time_penalty: float = 0.01
   goal_max_distance: float = 10.0
   costmap_stop: bool = False
+  agents: str = "world"
 
   def __post_init__(self):
     if self.mode not in MODES:
       raise ValueError(f"NavEnvConfig.mode must be one of {MODES}; got {self.mode!r}")
     if self.keepout not in KEEPOUT_MODES:
       raise ValueError(f"NavEnvConfig.keepout must be one of {KEEPOUT_MODES}; got {self.keepout!r}")
+    if self.agents not in AGENTS or (self.agents == "per_robot" and self.mode != "velocity"):
+      raise ValueError(f"NavEnvConfig.agents must be one of {AGENTS} ('per_robot' in velocity mode only); "
+                       f"got {self.agents!r} in {self.mode!r} mode")
     c = self.crop_cells
     if isinstance(c, bool) or int(c) != c or c < 3 or c % 2 == 0:
       raise ValueError(f"NavEnvConfig.crop_cells must be an odd integer >= 3; got {c!r}")
@@ -171,7 +186,7 @@ class NavEnvConfig:
       raise ValueError(f"NavEnvConfig.costmap_stop must be True or False; got {self.costmap_stop!r}")
     object.__setattr__(self, "costmap_stop", bool(self.costmap_stop))
     for f in dataclasses.fields(self):
-      if f.name in ("mode", "keepout", "crop_cells", "costmap_stop"):
+      if f.name in ("mode", "keepout", "crop_cells", "costmap_stop", "agents"):
         continue
       v = getattr(self, f.name)
       want = "> 0" if f.name == "crop_spacing" else ">= 0"
@@ -257,7 +272,7 @@ class NavEnv(mjx_env.MjxEnv):
                    goal_logits=jnp.zeros((bank.nav.stations.shape[0],), _F32),
                    bank=bank, layout=jnp.zeros((), jnp.int32), navigation_mode=config.mode == "navigation")
     self._mjx_model = nav_model(fleet.mjx_model, task)
-    self._crop = self._crop_offsets()
+    self._crop = observation.crop_offsets(config.crop_cells, config.crop_spacing)
 
   @classmethod
   def create(cls, scenario: Scenario | None = None, fleet_config: FleetConfig | None = None,
@@ -324,8 +339,10 @@ class NavEnv(mjx_env.MjxEnv):
 
   @property
   def action_size(self) -> int:
-    """2K (velocity mode) or K (navigation mode)."""
+    """2K (velocity mode), K (navigation mode) or 2, each robot's (agents "per_robot")."""
     k = self.num_robots
+    if self._nav.agents == "per_robot":
+      return 2
     return 2 * k if self._nav.mode == "velocity" else k
 
   @property
@@ -373,19 +390,16 @@ class NavEnv(mjx_env.MjxEnv):
     """The L `World`s of the bank (their scenarios hold each layout's masks, for pictures)."""
     return self._layout_worlds
 
-  def _crop_offsets(self) -> np.ndarray:
-    n, s = self._nav.crop_cells, self._nav.crop_spacing
-    r = (np.arange(n) - n // 2) * s
-    fx, ly = np.meshgrid(r, r, indexing="xy")          # rows: left offset, cols: forward offset
-    return np.stack([fx.ravel(), ly.ravel()], axis=1).astype(np.float32)   # [C*C, 2] robot frame
-
   def _check_action(self, action) -> jax.Array:
     a = jnp.asarray(action)
     k = self.num_robots
+    if self._nav.agents == "per_robot" and a.shape != (k, 2):
+      raise ValueError(f"NavEnv.step (agents 'per_robot'): action must be float [K, 2] = ({k}, 2), each "
+                       f"robot's (v, w) in [-1, 1]; got shape {tuple(a.shape)}")
+    if self._nav.agents == "world" and self._nav.mode == "velocity" and a.shape != (2 * k,):
+      raise ValueError(f"NavEnv.step (velocity mode): action must be float [2K] = ({2 * k},), each "
+                       f"robot's (v, w) in [-1, 1]; got shape {tuple(a.shape)}")
     if self._nav.mode == "velocity":
-      if a.shape != (2 * k,):
-        raise ValueError(f"NavEnv.step (velocity mode): action must be float [2K] = ({2 * k},), each "
-                         f"robot's (v, w) in [-1, 1]; got shape {tuple(a.shape)}")
       if not jnp.issubdtype(a.dtype, jnp.floating):
         raise TypeError(f"NavEnv.step (velocity mode): action must be floating point; got {a.dtype}")
       return a.astype(_F32)
@@ -406,7 +420,8 @@ class NavEnv(mjx_env.MjxEnv):
 
     Returns:
       State with obs float32 [observation_size], reward and done float32 [] (0),
-      metrics (float32 [] each) and info (the per-episode state).
+      metrics (float32 [] each) and info (the per-episode state); with agents "per_robot"
+      obs float32 [K, observation_size] and reward, done and metrics float32 [K].
     """
     task = self._mjx_model.task
     fleet = self._fleet.with_params(task.world)
@@ -429,11 +444,11 @@ class NavEnv(mjx_env.MjxEnv):
       goal = kernels.sample_goal(k_goal, task.goal_logits, xy, jnp.full((self.num_robots,), -1, jnp.int32),
                           bank.nav, self._nav.goal_max_distance, lay * per, per)
     ws = dataclasses.replace(ws, goal=goal)
-    zero = jnp.zeros((), _F32)
+    zero = jnp.zeros((self.num_robots,) if self._nav.agents == "per_robot" else (), _F32)
     metrics = {name: zero for name in self._metric_names()}
     if self._nav.mode == "navigation":
       info = {"rng": k_rng, "world": ws}
-      obs = self._nav_obs(task, ws)
+      obs = observation.navigation_obs(task, ws, self.fleet_config.robot)
     else:
       k = self.num_robots
       info = {"rng": k_rng, "goal": goal, "cmd": jnp.zeros((k, 2), _F32), "speed": SpeedState.create(k),
@@ -443,8 +458,9 @@ class NavEnv(mjx_env.MjxEnv):
     return State(data=ws.data, obs=obs, reward=zero, done=zero, metrics=metrics, info=info)
 
   def _metric_names(self):
-    return ("progress", "goals_reached", "keepout_entries", "collisions", "speed_violation_s",
-            "speed_violation_after_clip_s", "speed_violation_outside_entry_s", "clipped", "costmap_stops", "bad_action")
+    names = ("progress", "goals_reached", "keepout_entries", "collisions", "speed_violation_s",
+             "speed_violation_after_clip_s", "speed_violation_outside_entry_s", "clipped", "costmap_stops", "bad_action")
+    return names + ("robot_collisions",) if self._nav.agents == "per_robot" else names
 
   # ------------------------------------------------------------------ step
 
@@ -453,12 +469,13 @@ class NavEnv(mjx_env.MjxEnv):
 
     Args:
       state: State of one env.
-      action: velocity mode float32 [2K], (v, w) per robot in [-1, 1];
-        navigation mode int32 [K], goal station ids (-1 keeps the goal).
+      action: velocity mode float32 [2K], (v, w) per robot in [-1, 1] ([K, 2] with agents
+        "per_robot"); navigation mode int32 [K], goal station ids (-1 keeps the goal).
 
     Returns:
       The next State: reward float32 [], done float32 [] (1.0 ends the episode),
-      metrics of this step (float32 [] each, summed over robots).
+      metrics of this step (float32 [] each, summed over robots); with agents "per_robot"
+      reward, done and metrics float32 [K], per robot (`sims.rl.agents`).
 
     Raises:
       ValueError / TypeError: an action of the wrong shape or dtype.
@@ -476,6 +493,7 @@ class NavEnv(mjx_env.MjxEnv):
     k = self.num_robots
     model = self._mjx_model
     info = dict(state.info)
+    per_robot = cfg.agents == "per_robot"
 
     bad = ~jnp.isfinite(action) | (jnp.abs(action) > 1.0)
     a = jnp.clip(jnp.where(jnp.isfinite(action), action, 0.0), -1.0, 1.0).reshape(k, 2)
@@ -507,6 +525,9 @@ class NavEnv(mjx_env.MjxEnv):
       excess = jnp.sum(jnp.abs(ramped - clipped), axis=1) * dt
       if cfg.costmap_stop:
         clipped, stopped = kernels.costmap_stop(task, data.qpos, clipped, dt)
+        if per_robot:
+          clipped, by_robot = agents.robot_stop(data.qpos, clipped, dt, r.radius)
+          stopped = stopped | by_robot
       else:
         stopped = jnp.zeros((k,), bool)
       v, w = clipped[:, 0], clipped[:, 1]
@@ -516,7 +537,7 @@ class NavEnv(mjx_env.MjxEnv):
       entry = cap < prev_cap
 
       def substep(c, _):
-        data, in_k, entries, collide, over, late_s, crossed, outside = c
+        data, in_k, entries, collide, over, late_s, crossed, outside, *touch = c
         ctrl = planar_ctrl(self._fleet.robot, v, w, data.qpos[:, 2])
         data = jax.vmap(lambda d, u: mjx_step(model, d, u))(data, ctrl)
         xy = data.qpos[:, :2]
@@ -532,21 +553,24 @@ class NavEnv(mjx_env.MjxEnv):
         out = over_limit & ~crossed
         return (data, kin, entries + (kin & ~in_k), collide | hit,
                 over + over_limit.astype(_F32) * fc.physics_dt, late_s + late.astype(_F32) * fc.physics_dt,
-                crossed, outside + out.astype(_F32) * fc.physics_dt), None
+                crossed, outside + out.astype(_F32) * fc.physics_dt,
+                *[t | agents.robot_contacts(xy, r.radius) for t in touch]), None
 
       zeros_b = jnp.zeros((k,), bool)
       zeros_f = jnp.zeros((k,), _F32)
-      (data, in_k, entries, collide, over, late, _, outside), _ = jax.lax.scan(
-          substep, (data, in_k, zeros_b.astype(jnp.int32), zeros_b, zeros_f, zeros_f, entry, zeros_f), None,
-          length=fc.substeps_per_tick)
+      (data, in_k, entries, collide, over, late, _, outside, *touch), _ = jax.lax.scan(
+          substep, (data, in_k, zeros_b.astype(jnp.int32), zeros_b, zeros_f, zeros_f, entry, zeros_f,
+                    *[zeros_b] * per_robot), None, length=fc.substeps_per_tick)
       acc = jax.tree.map(jnp.add, acc, {"entries": entries, "collide": collide.astype(jnp.int32),
                                         "over": over, "late": late, "outside": outside, "excess": excess,
-                                        "stops": stopped.astype(jnp.int32)})
+                                        "stops": stopped.astype(jnp.int32),
+                                        **({"robot": touch[0].astype(jnp.int32)} if touch else {})})
       return (data, clipped, speed, in_k, cap, acc), cap
 
     acc0 = {"entries": jnp.zeros((k,), jnp.int32), "collide": jnp.zeros((k,), jnp.int32),
             "over": jnp.zeros((k,), _F32), "late": jnp.zeros((k,), _F32), "outside": jnp.zeros((k,), _F32),
-            "excess": jnp.zeros((k,), _F32), "stops": jnp.zeros((k,), jnp.int32)}
+            "excess": jnp.zeros((k,), _F32), "stops": jnp.zeros((k,), jnp.int32),
+            **({"robot": jnp.zeros((k,), jnp.int32)} if per_robot else {})}
     prev_cap = jnp.where(swapped, jnp.inf, info["cap"])
     (data, cmd, speed, in_k, _, acc), caps = jax.lax.scan(tick, (data, cmd, speed, in_k, prev_cap, acc0), None,
                                                           length=fc.ticks_per_step)
@@ -568,20 +592,32 @@ class NavEnv(mjx_env.MjxEnv):
     approach = jnp.maximum(jnp.abs(cmd[:, 0]) - ahead_cap, 0.0) * fc.step_seconds
     collided = acc["collide"] > 0
     entered = acc["entries"] > 0
-    reward = jnp.sum(cfg.progress_weight * progress + cfg.goal_bonus * reached
-                     - cfg.keepout_penalty * acc["entries"] - cfg.collision_penalty * collided
-                     - cfg.speed_penalty * acc["over"] - cfg.clip_penalty * acc["excess"]
-                     - cfg.approach_penalty * approach - cfg.time_penalty)
-    done = jnp.any(collided) | (jnp.any(entered) if cfg.keepout == "terminate" else False)
+    reward = (cfg.progress_weight * progress + cfg.goal_bonus * reached
+              - cfg.keepout_penalty * acc["entries"] - cfg.collision_penalty * collided
+              - cfg.speed_penalty * acc["over"] - cfg.clip_penalty * acc["excess"]
+              - cfg.approach_penalty * approach - cfg.time_penalty)          # [K]
     info.update(rng=rng, goal=goal, cmd=cmd, speed=speed, cap=caps[-1], last_qpos=data.qpos, in_keepout=in_k)
+    fold = (lambda x: x) if per_robot else jnp.sum          # per robot, or summed over the world's robots
     metrics = dict(state.metrics)      # keys wrappers added (Brax's EvalWrapper adds "reward") stay
-    metrics.update({"progress": jnp.sum(progress), "goals_reached": jnp.sum(reached).astype(_F32),
-               "keepout_entries": jnp.sum(acc["entries"]).astype(_F32),
-               "collisions": jnp.sum(collided).astype(_F32), "speed_violation_s": jnp.sum(acc["over"]),
-               "speed_violation_after_clip_s": jnp.sum(acc["late"]),
-               "speed_violation_outside_entry_s": jnp.sum(acc["outside"]),
-               "costmap_stops": jnp.sum(acc["stops"]).astype(_F32),
-               "clipped": jnp.sum(acc["excess"]), "bad_action": jnp.sum(bad).astype(_F32)})
+    metrics.update({"progress": fold(progress), "goals_reached": fold(reached).astype(_F32),
+               "keepout_entries": fold(acc["entries"]).astype(_F32),
+               "collisions": fold(collided).astype(_F32), "speed_violation_s": fold(acc["over"]),
+               "speed_violation_after_clip_s": fold(acc["late"]),
+               "speed_violation_outside_entry_s": fold(acc["outside"]),
+               "costmap_stops": fold(acc["stops"]).astype(_F32),
+               "clipped": fold(acc["excess"]), "bad_action": fold(jnp.sum(bad.reshape(k, 2), axis=1)).astype(_F32)})
+    if per_robot:
+      # Each robot's episode ends on its own; the robot is respawned and the world goes on (sims.rl.agents).
+      touched = acc["robot"] > 0
+      metrics["robot_collisions"] = touched.astype(_F32)
+      reward = reward - cfg.collision_penalty * touched
+      done = collided | touched | (entered if cfg.keepout == "terminate" else False)
+      rng, k_respawn = jax.random.split(rng)
+      data, info = agents.respawn(k_respawn, task, self._fleet.data0, data, dict(info, rng=rng), done,
+                                  cfg.goal_max_distance)
+    else:
+      reward = jnp.sum(reward)
+      done = jnp.any(collided) | (jnp.any(entered) if cfg.keepout == "terminate" else False)
     obs = self._obs(task, data, info)
     return state.replace(data=data, obs=obs, reward=reward.astype(_F32), done=done.astype(_F32),
                          metrics=metrics, info=info)
@@ -607,76 +643,14 @@ class NavEnv(mjx_env.MjxEnv):
     metrics.update(goals_reached=goals.astype(_F32), keepout_entries=entries.astype(_F32),
                    bad_action=jnp.sum(bad).astype(_F32))
     info = dict(state.info, world=ws)
-    return state.replace(data=ws.data, obs=self._nav_obs(task, ws), reward=reward.astype(_F32),
+    return state.replace(data=ws.data, obs=observation.navigation_obs(task, ws, self.fleet_config.robot), reward=reward.astype(_F32),
                          done=done.astype(_F32), metrics=metrics, info=info)
 
-  # ------------------------------------------------------------------ observations
-
   def _obs(self, task: NavTask, data: mjx.Data, info: dict) -> jax.Array:
-    """float32 [K * D] (see the module docstring)."""
-    r = self.fleet_config.robot
-    p = task.world
-    k = self.num_robots
-    pose = data.qpos[:, :3]
-    c, s = jnp.cos(pose[:, 2]), jnp.sin(pose[:, 2])
-    off = jnp.asarray(self._crop)                                          # [C2, 2]
-    wx, wy = kernels.rotate(c[:, None], s[:, None], off[None, :, 0], off[None, :, 1])
-    pts = jnp.stack([wx + pose[:, :1], wy + pose[:, 1:2]], axis=-1)       # [K, C2, 2]
-    static = kernels.grid_value(task.static_inflated, p.map_origin, p.map_resolution, pts, constants.NO_INFORMATION)
-    keep = kernels.keepout_cost(task, pts).astype(jnp.int32)
-    keep = jnp.where(keep == constants.NO_INFORMATION, 0, keep)
-    crop = jnp.maximum(static, keep).astype(_F32) / 255.0                # [K, C2]
-
-    cap = info["cap"]
-    limited = jnp.isfinite(cap)
-    cap_obs = jnp.stack([jnp.where(limited, jnp.minimum(cap / r.max_speed, 1.0), 1.0),
-                         limited.astype(_F32)], axis=1)
-    ahead = jnp.asarray(AHEAD, _F32)
-    ahead_pts = pose[:, None, :2] + ahead[None, :, None] * jnp.stack([c, s], axis=1)[:, None, :]
-    ahead_cap = kernels.mps_cap(task, ahead_pts, r.max_speed)
-    ahead_obs = jnp.where(jnp.isfinite(ahead_cap), jnp.minimum(ahead_cap / r.max_speed, 1.0), 1.0)
-
-    nav = task.bank.nav
-    goal_xy = nav.stations[info["goal"]]
-    d = goal_xy - pose[:, :2]
-    gx, gy = kernels.rotate(c, -s, d[:, 0], d[:, 1])
-    gdist = jnp.linalg.norm(d, axis=-1)
-    goal_obs = jnp.stack([jnp.clip(gx / 5.0, -1, 1), jnp.clip(gy / 5.0, -1, 1),
-                          jnp.minimum(gdist / 10.0, 1.0)], axis=1)
-    desc = jax.vmap(lambda g, q: navigation.descent_direction(nav, g, q))(info["goal"], pose[:, :2])
-    dx, dy = kernels.rotate(c, -s, desc[:, 0], desc[:, 1])
-    ndist = jax.vmap(lambda g, q: navigation.nav_value(nav, g, q))(info["goal"], pose[:, :2])
-    nav_obs = jnp.stack([dx, dy, jnp.minimum(ndist / 20.0, 1.0)], axis=1)
-
-    spd = jnp.linalg.norm(data.qvel[:, :2], axis=-1)
-    vel_obs = jnp.stack([info["cmd"][:, 0] / r.max_speed, info["cmd"][:, 1] / r.max_yaw_rate,
-                         spd / r.max_speed], axis=1)
-
-    rel = pose[None, :, :2] - pose[:, None, :2]                          # [K, K, 2] others - self
-    dd = jnp.where(jnp.eye(k, dtype=bool), jnp.inf, jnp.linalg.norm(rel, axis=-1))
-    j = jnp.argmin(dd, axis=1)
-    near = rel[jnp.arange(k), j]
-    ox, oy = kernels.rotate(c, -s, near[:, 0], near[:, 1])
-    has = jnp.isfinite(jnp.min(dd, axis=1))
-    other_obs = jnp.stack([jnp.where(has, jnp.clip(ox / 3.0, -1, 1), 0.0),
-                           jnp.where(has, jnp.clip(oy / 3.0, -1, 1), 0.0),
-                           jnp.where(has, jnp.minimum(jnp.min(dd, axis=1) / 3.0, 1.0), 1.0)], axis=1)
-    per_robot = jnp.concatenate([crop, cap_obs, ahead_obs, goal_obs, nav_obs, vel_obs, other_obs], axis=1)
-    return per_robot.reshape(-1).astype(_F32)
-
-  def _nav_obs(self, task: NavTask, ws: WorldState) -> jax.Array:
-    """Navigation mode: per robot (x, y, cos, sin, goal x, goal y, cap, speed), then every station (x, y)."""
-    r = self.fleet_config.robot
-    p = task.world
-    pose = ws.data.qpos[:, :3]
-    scale = 10.0
-    cap = ws.speed_cap
-    per = jnp.stack([pose[:, 0] / scale, pose[:, 1] / scale, jnp.cos(pose[:, 2]), jnp.sin(pose[:, 2]),
-                     p.nav.stations[ws.goal, 0] / scale, p.nav.stations[ws.goal, 1] / scale,
-                     jnp.where(jnp.isfinite(cap), jnp.minimum(cap / r.max_speed, 1.0), 1.0),
-                     jnp.linalg.norm(ws.data.qvel[:, :2], axis=-1) / r.max_speed], axis=1)
-    return jnp.concatenate([per.reshape(-1), p.nav.stations.reshape(-1) / scale]).astype(_F32)
+    """float32 [K * D] (agents "world") or [K, D] ("per_robot"); see the module docstring."""
+    per_robot = observation.velocity_obs(task, data.qpos, data.qvel, info, self.fleet_config.robot, self._crop)
+    return per_robot if self._nav.agents == "per_robot" else per_robot.reshape(-1)
 
 
-__all__ = ["AHEAD", "KEEPOUT_MODES", "MODES", "NavEnv", "NavEnvConfig", "NavModel", "NavTask", "State",
+__all__ = ["AGENTS", "AHEAD", "KEEPOUT_MODES", "MODES", "NavEnv", "NavEnvConfig", "NavModel", "NavTask", "State",
            "clip_command", "nav_model"]

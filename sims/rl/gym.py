@@ -149,6 +149,9 @@ def _resolve(env, episode_length, randomize, randomization_fn, render_mode, who)
   if env.nav_config.mode != "velocity":
     raise ValueError(f"{who}: env must be in velocity mode (NavEnvConfig(mode='velocity')); "
                      f"got mode {env.nav_config.mode!r}")
+  if env.nav_config.agents != "world":
+    raise ValueError(f"{who}: env must be one agent per env (NavEnvConfig(agents='world')); got agents "
+                     f"{env.nav_config.agents!r} (the per-robot mode trains through sims.rl.fleet)")
   fn = (randomization_fn or randomize_zones_and_goals) if randomize else None
   return env, fn
 

@@ -10,7 +10,8 @@ A policy folder holds two files:
 * `policy.json`: the format name and version, the actor's architecture
   (`hidden_sizes`, `activation`, `observation_size`, `action_size`), the
   env it was trained on (`env_config`: every `NavEnvConfig` field;
-  `robots_per_world`; `episode_length`), the `trainer`, the `jax` version,
+  `robots_per_world`, the K it was trained with (a policy with `env_config.agents` "per_robot"
+  drives each robot and runs at any K); `episode_length`), the `trainer`, the `jax` version,
   `extra` (free-form: seed, timesteps, figures) and `weights_sha256`, the
   SHA-256 of `policy.msgpack`'s bytes.
 * `policy.msgpack`: `flax.serialization` msgpack of `{"actor": params,
@@ -39,9 +40,11 @@ the bound of the largest architecture accepted), its SHA-256 must equal
 architecture gives, all finite, with variances >= 0. Every problem is a
 `PolicyError` (a ValueError) naming the file and what was expected.
 
-Files of format version 1 (written before the checksum) are refused with a
+Files of format version 2 (written before `NavEnvConfig.agents`) are read as they are, with
+agents "world": every policy of that version drives one world. Files of format version 1
+(written before the checksum) are refused with a
 message saying so; `add_checksum(folder)` re-writes such a folder's
-`policy.json` as version 2 with the checksum of the weights it holds (the
+`policy.json` as version 3 (agents "world") with the checksum of the weights it holds (the
 weights are checked against the architecture and left unchanged). Run it only
 on weights you trust: the checksum proves the file unchanged since, not sound.
 """
@@ -64,7 +67,7 @@ import numpy as np
 from jaxfilters.map_decode import read_regular_file
 
 FORMAT = "jaxfilters-policy"
-VERSION = 2                # 2: policy.json holds weights_sha256
+VERSION = 3                # 2: policy.json holds weights_sha256; 3: env_config holds agents
 JSON_NAME = "policy.json"
 MSGPACK_NAME = "policy.msgpack"
 MAX_JSON_BYTES = 2 ** 20
@@ -238,20 +241,23 @@ def save_policy(folder, algo, train_state, *, env_config, fleet_config, episode_
 
 
 def add_checksum(folder) -> Path:
-  """Re-writes a version-1 policy folder's `policy.json` as version 2 with the weights' SHA-256.
+  """Re-writes a version-1 (or 2) policy folder's `policy.json` as version 3 with the weights' SHA-256.
 
   The weights are read and checked against the architecture exactly as `load_policy` checks
   them, and are not changed. Use it only on a folder whose weights you trust.
 
   Raises:
-    PolicyError: the folder does not hold a valid version-1 (or version-2) policy.
+    PolicyError: the folder does not hold a valid version-1, 2 or 3 policy.
   """
   folder = Path(folder)
   path = folder / JSON_NAME
   meta = _parse_json(path)
   if isinstance(meta, dict) and meta.get("version") == 1 and "weights_sha256" not in meta:
-    meta = {**meta, "version": VERSION, "weights_sha256": "0" * 64}
-  meta = check_policy_meta(meta, path)
+    env = meta.get("env_config")
+    # Checked as version 3 if its env_config has agents, else as version 2 (before the field).
+    meta = {**meta, "version": VERSION if isinstance(env, dict) and "agents" in env else 2,
+            "weights_sha256": "0" * 64}
+  meta = {**check_policy_meta(meta, path), "version": VERSION}
   raw = _read(folder / MSGPACK_NAME, msgpack_size_bound(meta["hidden_sizes"], meta["observation_size"],
                                                           meta["action_size"]))
   _decode_tree(raw, meta, str(folder / MSGPACK_NAME))
@@ -395,8 +401,8 @@ def check_policy_meta(meta, path) -> dict:
 
   if meta["format"] != FORMAT:
     raise bad("format", repr(FORMAT))
-  if not _is_int(meta["version"]) or meta["version"] != VERSION:
-    raise bad("version", f"{VERSION} (this reader's format version)")
+  if not _is_int(meta["version"]) or meta["version"] not in (2, VERSION):
+    raise bad("version", f"{VERSION} (this reader's format version) or 2")
   h = meta["hidden_sizes"]
   if not isinstance(h, list) or not 1 <= len(h) <= MAX_LAYERS or \
       not all(_is_int(x) and 1 <= x <= MAX_HIDDEN for x in h):
@@ -417,6 +423,12 @@ def check_policy_meta(meta, path) -> dict:
   env = meta["env_config"]
   if not isinstance(env, dict):
     raise bad("env_config", "an object of NavEnvConfig fields")
+  if meta["version"] == 2:      # written before NavEnvConfig.agents: every version-2 policy drives one world
+    if "agents" in env:
+      raise PolicyError(f"{path}: 'env_config' has field 'agents', which format version 2 does not have "
+                        f"(version {VERSION} does)")
+    env = {**env, "agents": "world"}
+    meta = {**meta, "env_config": env}
   unknown, missing = sorted(set(env) - set(defaults)), sorted(set(defaults) - set(env))
   if unknown or missing:
     which = f"unknown field {unknown[0]!r}" if unknown else f"missing field {missing[0]!r}"

@@ -136,12 +136,17 @@ def make_ppo(adapter: GymnaxAdapter, *, timesteps_per_call: int, num_envs: int =
 
 
 def mean_policy(algo, ts) -> Callable:
-  """The policy's mean action (deterministic), with rejax's observation normalisation."""
+  """The policy's mean action (deterministic), with rejax's observation normalisation.
+
+  `act(obs)` takes one observation float32 [D] or a batch [..., D] (each robot's, for one agent per
+  robot) and returns float32 [A] or [..., A] in [-1, 1].
+  """
   def act(obs):
     if algo.normalize_observations:
       obs = algo.normalize_obs(ts.obs_rms_state, obs)
-    mean = algo.actor.apply(ts.actor_ts.params, obs[None], method="_action_dist").mean()[0]
-    return jnp.clip(mean, -1.0, 1.0)
+    rows = obs.reshape(-1, obs.shape[-1])           # rejax's networks flatten all but the first axis
+    mean = algo.actor.apply(ts.actor_ts.params, rows, method="_action_dist").mean()
+    return jnp.clip(mean.reshape(*obs.shape[:-1], mean.shape[-1]), -1.0, 1.0)
   return act
 
 
@@ -277,7 +282,7 @@ def plan_training(timesteps: int, num_envs: int, num_steps: int, evals: int) -> 
 
 
 def train_with_curve(adapter: GymnaxAdapter, algo, key: jax.Array, *, calls, num_eval: int,
-                     callback: Callable | None = None, mesh=None):
+                     callback: Callable | None = None, mesh=None, evaluate: Callable = evaluate_policy):
   """Trains `sum(calls)` PPO iterations in `len(calls)` calls, evaluating before and after each call.
 
   The env steps reported are the train state's own counter (`global_step`, counted on the
@@ -294,6 +299,10 @@ def train_with_curve(adapter: GymnaxAdapter, algo, key: jax.Array, *, calls, num
       steps per second; 0.0 at index 0).
     mesh: optional 1-D device mesh: the env batch is sharded over it (see the
       module docstring); num_envs must be a multiple of its size.
+    evaluate: `evaluate(adapter, act, key, num_eval) -> dict of per-episode arrays`
+      (`evaluate_policy`; `sims.rl.fleet.evaluate_fleet_policy` for one agent per robot, whose
+      `algo` has `robots_per_world` K: the device counts robot-steps, the curve's env_steps are
+      those / K and its agent_steps the robot-steps).
 
   Returns:
     (final train state, evals: dict name -> float list [len(calls) + 1], timing dict
@@ -311,7 +320,8 @@ def train_with_curve(adapter: GymnaxAdapter, algo, key: jax.Array, *, calls, num
     raise ValueError(f"{sum(calls):,d} PPO iterations of {algo.num_envs * algo.num_steps:,d} env steps exceed "
                      f"{MAX_ENV_STEPS:,d} (the int32 env-step counter)")
   with jax.numpy_rank_promotion("allow"):     # rejax broadcasts [N, D] - [D] internally
-    return _train_with_curve(adapter, algo, key, calls=calls, num_eval=num_eval, callback=callback, mesh=mesh)
+    return _train_with_curve(adapter, algo, key, calls=calls, num_eval=num_eval, callback=callback, mesh=mesh,
+                             evaluate=evaluate)
 
 
 def train_program(algo, key: jax.Array, mesh=None):
@@ -340,10 +350,11 @@ def train_program(algo, key: jax.Array, mesh=None):
                                                 out_shardings=shardings)
 
 
-def _train_with_curve(adapter, algo, key, *, calls, num_eval, callback, mesh):
+def _train_with_curve(adapter, algo, key, *, calls, num_eval, callback, mesh, evaluate):
   k_init, k_eval = jax.random.split(key)
+  per_episode = evaluate
   evaluate = jax.jit(lambda ts, k: {n: jnp.mean(v) for n, v in
-                                    evaluate_policy(adapter, mean_policy(algo, ts), k, num_eval).items()})
+                                    per_episode(adapter, mean_policy(algo, ts), k, num_eval).items()})
   ts, train = train_program(algo, k_init, mesh)
   n0 = np.int32(calls[0])
   # The two programs compile at the same time (XLA compiles outside the GIL): the wall time is
@@ -358,7 +369,8 @@ def _train_with_curve(adapter, algo, key, *, calls, num_eval, callback, mesh):
     train_f = pool.submit(compile_in_thread, train, ts, n0)
     eval_f = pool.submit(compile_in_thread, evaluate, ts, k_eval)
     (train_c, t_train), (eval_c, t_eval) = train_f.result(), eval_f.result()
-  evals = {n: [] for n in (*EVAL_KEYS, "env_steps")}
+  agents = getattr(algo, "robots_per_world", None)      # one agent per robot: the device counts robot-steps
+  evals = {n: [] for n in (*EVAL_KEYS, "env_steps")}   # an evaluate's other figures follow
   train_s = 0.0
   per_iter = algo.num_envs * algo.num_steps
   start = int(ts.global_step)
@@ -366,13 +378,15 @@ def _train_with_curve(adapter, algo, key, *, calls, num_eval, callback, mesh):
   def record(ts, i, call_s):
     out = eval_c(ts, jax.random.fold_in(k_eval, i))
     for n, v in out.items():
-      evals[n].append(float(v))
+      evals.setdefault(n, []).append(float(v))
     done = int(ts.global_step) - start              # counted on the device
     want = sum(calls[:i]) * per_iter
     if done != want:
       raise RuntimeError(f"the train state counted {done:,d} env steps after {sum(calls[:i])} PPO iterations "
                          f"of {per_iter:,d}; expected {want:,d} (nothing was saved)")
-    evals["env_steps"].append(float(done))
+    evals["env_steps"].append(float(done // (agents or 1)))
+    if agents:
+      evals.setdefault("agent_steps", []).append(float(done))
     if callback is not None:
       point = {n: v[-1] for n, v in evals.items()}
       per_call = evals["env_steps"][-1] - (evals["env_steps"][-2] if i else evals["env_steps"][-1])

@@ -14,6 +14,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
+from sims.fleet.config import FleetConfig
 from sims.fleet.layouts import LayoutConfig
 from sims.rl.env import NavEnv, NavEnvConfig, NavModel
 from sims.fleet.scenario import Scenario
@@ -101,7 +102,8 @@ def randomize_zones_and_goals(model: NavModel, rng: jax.Array, *, limit_scale: t
 
 def training_env(scenario: Scenario | None = None, *, randomize: bool, seed: int,
                  config: NavEnvConfig = NavEnvConfig(), layouts: int = 16,
-                 layout_config: LayoutConfig = LayoutConfig(), evaluation: bool = False):
+                 layout_config: LayoutConfig = LayoutConfig(), evaluation: bool = False,
+                 robots_per_world: int = 1):
   """The env and randomization_fn the `jaxfilters rl` commands train and evaluate on.
 
   Args:
@@ -114,18 +116,22 @@ def training_env(scenario: Scenario | None = None, *, randomize: bool, seed: int
     layouts: L >= 1, bank size when randomize.
     layout_config: how random layouts are drawn.
     evaluation: the env is for evaluation (see seed).
+    robots_per_world: K robots per world (`FleetConfig.robots_per_world`; more than one is
+      what `NavEnvConfig(agents="per_robot")` is for).
 
   Returns:
     (NavEnv, randomization_fn or None).
 
   Raises:
-    ValueError: layouts < 1, a negative seed, or a scenario the env cannot be built on.
+    ValueError: layouts < 1, a negative seed, a bad robots_per_world, or a scenario the env cannot
+      be built on.
   """
   if isinstance(seed, bool) or int(seed) != seed or seed < 0:
     raise ValueError(f"seed must be an integer >= 0; got {seed!r}")
+  fleet_config = FleetConfig(robots_per_world=robots_per_world)
   if not randomize:
-    return NavEnv.create(scenario, config=config), None
-  env = NavEnv.create(scenario, config=config, layouts=layouts, layout_seed=2 * int(seed) + int(bool(evaluation)),
+    return NavEnv.create(scenario, fleet_config, config=config), None
+  env = NavEnv.create(scenario, fleet_config, config=config, layouts=layouts, layout_seed=2 * int(seed) + int(bool(evaluation)),
                       layout_config=layout_config)
   return env, randomize_zones_and_goals
 

@@ -314,7 +314,11 @@ def _set(path, value):
 
 
 POLICY_ERRORS = [
-    ({"meta_edit": _set("version", 3)}, "'version' must be 2"),
+    ({"meta_edit": _set("version", 4)}, "'version' must be 3 (this reader's format version) or 2"),
+    ({"meta_edit": _set("version", 2)}, "'env_config' has field 'agents', which format version 2 does not have"),
+    ({"meta_edit": _set("env_config/agents", KeyError)}, "'env_config' has missing field 'agents'"),
+    ({"meta_edit": _set("env_config/agents", "robot")}, "env_config: NavEnvConfig.agents must be one of"),
+    ({"meta_edit": _set("env_config/agents", 1)}, "env_config.agents must be a string"),
     ({"meta_edit": _set("hidden_sizes", [4, 0])}, "'hidden_sizes' must be"),
     ({"meta_edit": _set("observation_size", True)}, "'observation_size' must be an integer"),
     ({"meta_edit": _set("activation", "softsign")}, "'activation' must be one of"),
@@ -360,7 +364,7 @@ def test_policy_files_are_checked_before_reading(tmp_path):
   with pytest.raises(P.PolicyError, match="not a flax msgpack file"):
     P.load_policy(folder)
   write_policy(folder)
-  (folder / "policy.json").write_text((folder / "policy.json").read_text().replace('"version": 2', '"version": NaN'))
+  (folder / "policy.json").write_text((folder / "policy.json").read_text().replace(f'"version": {P.VERSION}', '"version": NaN'))
   with pytest.raises(P.PolicyError, match="not valid JSON"):
     P.load_policy(folder)
   (folder / "policy.json").write_text('{"format": "a", "format": "b"}')

@@ -135,7 +135,7 @@ def _bound_edit(meta: dict, rng: random.Random) -> None:
     if rng.random() < 0.2:
       meta.pop("weights_sha256", None)
   else:
-    meta["version"] = rng.choice((1, 0, 3, "2", 2.0, True))
+    meta["version"] = rng.choice((1, 0, 2, 4, str(P.VERSION), float(P.VERSION), True))
     if rng.random() < 0.5:
       meta.pop("weights_sha256", None)
 
@@ -143,7 +143,7 @@ def _bound_edit(meta: dict, rng: random.Random) -> None:
 def _json_text_edit(text: str, rng: random.Random) -> str:
   op = rng.randrange(5)
   if op == 0:
-    return text.replace(rng.choice(('"version": 2', '"observation_size": 98', '"crop_cells": 9')),
+    return text.replace(rng.choice((f'"version": {P.VERSION}', '"observation_size": 98', '"crop_cells": 9')),
                         rng.choice(("NaN", "Infinity", "-Infinity", "1e400", "-0", "1" * 5000)), 1)
   if op == 1:                                       # a duplicate key
     return text.replace("{", '{"format": "jaxfilters-policy", ', 1)

@@ -167,6 +167,16 @@ def test_version_1_files_are_refused_until_a_checksum_is_added(tmp_path):
 def test_shipped_example_policy_has_its_checksum():
   pol = P.load_policy(REPO / "examples" / "ppo_nav")
   assert pol.hidden_sizes == (64, 64) and pol.observation_size == 98
+  # A version-2 file (written before NavEnvConfig.agents) drives one world.
+  assert json.loads((REPO / "examples" / "ppo_nav" / P.JSON_NAME).read_text())["version"] == 2
+  assert pol.env_config.agents == "world" and pol.robots_per_world == 1
+
+
+def test_per_robot_policies_load_with_their_mode(tmp_path):
+  folder = save(tmp_path / "p", env_config=NavEnvConfig(agents="per_robot"), robots=8)
+  assert json.loads((folder / P.JSON_NAME).read_text())["env_config"]["agents"] == "per_robot"
+  pol = P.load_policy(folder)
+  assert pol.env_config.agents == "per_robot" and pol.robots_per_world == 8
 
 
 # ----------------------------------------------------------------------------- NaN actions
