@@ -564,15 +564,16 @@ def run_eval(args) -> int:
   print(f"{scenario.name}: {what} of up to {length} steps, seed {args.seed}, "
         f"{'randomised' if args.randomize else 'fixed'} zones and goals ({result['device']}, "
         f"{result['wall_s']:.1f} s)")
-  rows = (("success", f"{100 * result['success']:.1f} % of episodes reached a goal"),
-          ("goals per episode", f"{result['goals_per_episode']:.3f}"),
+  ep = "robot-episode" if per_robot else "episode"       # what each figure is per
+  rows = (("success", f"{100 * result['success']:.1f} % of {ep}s reached a goal"),
+          (f"goals per {ep}", f"{result['goals_per_episode']:.3f}"),
           ("keepout entries", f"{result['keepout_entries']} in all"),
           ("collisions", f"{result['collisions']} in all"),
           ("bad actions", f"{result['bad_action_steps']} steps in all (NaN actions the env replaced by 0)"),
-          ("above speed limit", f"{result['speed_excess_s']:.4f} s per episode"),
+          ("above speed limit", f"{result['speed_excess_s']:.4f} s per {ep}"),
           ("mean return", f"{result['mean_return']:.3f}"),
-          ("clipped command", f"{result['clipped_per_episode']:.4f} m per episode"),
-          ("steps per episode", f"{result['steps_per_episode']:.1f}"))
+          ("clipped command", f"{result['clipped_per_episode']:.4f} m per {ep}"),
+          (f"steps per {ep}", f"{result['steps_per_episode']:.1f}"))
   if per_robot:
     rows += (("robot collisions", (f"{result['robot_collisions']} in all, "
                                    f"{result['robot_collisions_per_robot_episode']:.4f} per robot-episode")),)

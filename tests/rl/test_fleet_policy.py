@@ -192,3 +192,11 @@ def test_world_mode_is_unchanged_by_the_option(fleet):
   assert env.action_size == 2 * K
   s2 = jax.eval_shape(env.step, s, jax.ShapeDtypeStruct((2 * K,), jnp.float32))
   assert s2.done.shape == () and all(v.shape == () for v in s2.metrics.values())
+
+
+def test_gymnasium_envs_refuse_the_per_robot_mode(fleet):
+  from sims.rl.gym import NavGymEnv, NavVectorEnv
+  with pytest.raises(ValueError, match=r"NavGymEnv: env must be one agent per env.*'per_robot'.*sims.rl.fleet"):
+    NavGymEnv(env=fleet[0])
+  with pytest.raises(ValueError, match="one agent per env"):
+    NavVectorEnv(2, env=fleet[0])
