@@ -18,6 +18,18 @@ if [ -d .whl ] && ls .whl/*.whl >/dev/null 2>&1; then
 else
   export PYTHONPATH=$PWD
 fi
+# The checkout is on PYTHONPATH, not installed: the `jaxfilters` command finds `fleet`, `bench` and
+# `rl` through the entry points pyproject.toml declares, so they are written as package metadata.
+mkdir -p /tmp/site
+python3 - <<'PY'
+import pathlib, tomllib
+eps = tomllib.loads(pathlib.Path("pyproject.toml").read_text())["project"]["entry-points"]
+d = pathlib.Path("/tmp/site/jaxfilters_checkout-0.dist-info")
+d.mkdir(exist_ok=True)
+(d / "METADATA").write_text("Metadata-Version: 2.1\nName: jaxfilters-checkout\nVersion: 0\n")
+(d / "entry_points.txt").write_text("".join(f"[{g}]\n" + "".join(f"{k} = {v}\n" for k, v in e.items()) for g, e in eps.items()))
+PY
+export PYTHONPATH=/tmp/site:$PWD
 export PYTHONUNBUFFERED=1
 
 echo "== devices"
