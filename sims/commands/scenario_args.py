@@ -15,6 +15,8 @@ Scenario. Every problem is a `jaxfilters.cli.CliError` (one line, exit 2).
 
 from __future__ import annotations
 
+import dataclasses
+import sys
 from pathlib import Path
 
 from jaxfilters import cli as jcli
@@ -92,9 +94,32 @@ def scenario_from_params(args, command: str, what: str = "the fleet"):
   import numpy as np
   info = speed.mask.info
   base, mult = float(np.asarray(info.base).reshape(-1)[0]), float(np.asarray(info.multiplier).reshape(-1)[0])
-  return Scenario.load(args.map, costmap.keepout.mask_yaml, speed.mask_yaml,
-                       speed_type=1 if speed.percentage else 2, speed_base=base, speed_multiplier=mult,
-                       layers=layers)
+  scenario = Scenario.load(args.map, costmap.keepout.mask_yaml, speed.mask_yaml,
+                           speed_type=1 if speed.percentage else 2, speed_base=base, speed_multiplier=mult)
+  return dataclasses.replace(scenario, layers=at_map_resolution(layers, scenario.map.resolution, command))
+
+
+def at_map_resolution(layers, resolution: float, command: str) -> tuple:
+  """The local costmap's layers at the map's resolution, with one warning line if they were not.
+
+  Nav2's local costmap has its own `resolution` (Nav2's bringup: 0.05 m beside its 0.03 m
+  warehouse map) and resamples the static map into it; the fleet's local costmaps are
+  windows of the map itself, so a params file with another local resolution runs its
+  inflation layers at the map's resolution, their radii and scaling factors (metres) as the
+  file gives them. The library refuses the mismatch (`sims.fleet.world.local_layers`); the
+  command says what it does and carries on, so a Nav2 user's own params and map run unchanged.
+  """
+  import numpy as np
+  out = []
+  for layer in layers:
+    if np.float32(layer.config.resolution) != np.float32(resolution):
+      print(f"jaxfilters {command}: warning: local_costmap layer '{layer.name}' is at resolution "
+            f"{layer.config.resolution:g} m (the params' local_costmap resolution) but the fleet's local "
+            f"costmaps are windows of the map at {resolution:g} m: it runs there, its radii and scaling "
+            "factors in metres unchanged", file=sys.stderr)
+      layer = dataclasses.replace(layer, config=dataclasses.replace(layer.config, resolution=float(resolution)))
+    out.append(layer)
+  return tuple(out)
 
 
 def scenario_from_args(args, command: str, what: str = "the fleet"):

@@ -38,11 +38,29 @@ def test_params_local_costmap_layers_reach_the_scenario():
   assert _scenario("--map", str(ASSETS / "default_map.yaml"), "--params", str(ASSETS / "nav2_params.yaml")).layers == ()
 
 
+def test_a_local_costmap_at_another_resolution_runs_at_the_maps_with_a_warning(tmp_path, capsys):
+  """Nav2's bringup pairs a 0.05 m local costmap with its 0.03 m warehouse map; the fleet's local
+  costmaps are windows of the map, so the layers run at the map's resolution and one line says so."""
+  text = LANES.read_text()
+  edit = ("resolution: 0.05\n      robot_radius", "resolution: 0.1\n      robot_radius")
+  assert edit[0] in text
+  params = tmp_path / "p.yaml"
+  params.write_text(text.replace(*edit))
+  masks = ["--mask", f"keepout_filter_mask_server={ASSETS / 'default_keepout.yaml'}",
+           "--mask", f"speed_filter_mask_server={ASSETS / 'default_speed.yaml'}"]
+  sc = _scenario("--map", str(ASSETS / "default_map.yaml"), "--params", str(params), *masks)
+  warn = [line for line in capsys.readouterr().err.splitlines() if "warning" in line]
+  assert len(warn) == 1 and "lane_inflation_layer" in warn[0] and "at resolution 0.1 m" in warn[0] \
+      and "windows of the map at 0.05 m" in warn[0], warn
+  assert sc.layers[0].config.resolution == 0.05 and sc.layers[0].config.inflation_radius == 0.8
+  # The same file at the map's resolution: no warning.
+  _scenario("--map", str(ASSETS / "default_map.yaml"), "--params", str(LANES))
+  assert "warning" not in capsys.readouterr().err
+
+
 @pytest.mark.parametrize("edit, extra, said", [
-    (("resolution: 0.05\n      robot_radius", "resolution: 0.1\n      robot_radius"), [],
-     "set local_costmap resolution: 0.05"),
     (None, ["--keepout-escape", "center"], "keepout escape"),
-], ids=["resolution", "keepout-escape"])
+], ids=["keepout-escape"])
 def test_layers_the_fleet_cannot_run_are_usage_errors(edit, extra, said, tmp_path, capsys):
   params = LANES
   if edit is not None:
