@@ -49,8 +49,8 @@ def train_args(out: Path, smoke: bool, timesteps: int, num_envs: int) -> list[st
 def eval_runs(out: Path, maps: Path, smoke: bool) -> list[tuple[str, list[str]]]:
   """(label, argv) of each evaluation: about 2,048 robot-episodes each (one world each with --smoke)."""
   # Nav2's map and masks as three files, the speed mask read as Nav2's bringup params give it (type 1,
-  # base 100, multiplier -1: `rl eval`'s defaults). `--params nav2_params.yaml` is refused on this map:
-  # its local costmap resolution (0.05 m) is not the map's (0.03 m), which the env's layers need.
+  # base 100, multiplier -1: `rl eval`'s defaults), with the fleet's inflation the policy trained with
+  # (`--params nav2_params.yaml` would add bringup's 0.70 m local inflation layer).
   nav2 = ["--map", str(maps / "warehouse.yaml"), "--keepout", str(maps / "warehouse_keepout.yaml"),
           "--speed", str(maps / "warehouse_speed.yaml"), "--speed-type", "1", "--speed-base", "100",
           "--speed-multiplier", "-1"]
