@@ -69,7 +69,9 @@ def nav2_maps() -> Path:
 # short files fill in at the end instead of one worker running a long file alone while the other
 # has nothing left. pytest-xdist's default order (files with the most tests first) would start
 # these last: most have few tests.
-SLOW_FILES = ("project/test_notebooks.py", "scale/test_sharding.py", "commands/test_rl.py", "rl/test_env.py",
+# commands/test_rl.py first: it compiles the suite's small training run (tests/rl_small.py) at once,
+# and notebook 04, rl/test_env.py and rl/test_training_counts.py, later, load it from the cache.
+SLOW_FILES = ("commands/test_rl.py", "project/test_notebooks.py", "scale/test_sharding.py", "rl/test_env.py",
               "project/test_readme.py", "fleet/test_env.py", "jaxfilters/test_layers.py",
               "jaxfilters/test_keepout_paths.py", "record/test_bag.py", "fleet/test_keepout_escape.py",
               "jaxfilters/test_keepout_prologue.py", "jaxfilters/test_keepout_paths_random.py",

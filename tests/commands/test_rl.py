@@ -5,7 +5,8 @@ the JAX process, as the fleet CLI tests do); a 4-device run of the same command 
 subprocess (`--xla_force_host_platform_device_count=4`), so the two compile side by side, and is
 compared with it at the end: the same env steps, the same learning curve per sample, the same
 weights up to float rounding. Networks are tiny (one hidden layer of 16) and every run is 2 PPO
-iterations of 4 envs x 8 steps, so the cost is the env's compile.
+iterations of 4 envs x 8 steps, so the cost is the env's compile; the run is tests/rl_small.py's, whose
+programs the other small training runs of the suite share through the session's compilation cache.
 """
 
 from __future__ import annotations
@@ -30,11 +31,12 @@ import pytest
 
 from jaxfilters import cli
 from sims.rl import policy as P
+from tests import rl_small
 
 REPO = Path(__file__).resolve().parents[2]
 ASSETS = REPO / "sims" / "assets"
-TRAIN_ARGS = ["--timesteps", "64", "--num-envs", "4", "--num-steps", "8", "--episode-length", "6", "--evals", "1",
-              "--num-eval", "2", "--hidden", "16", "--randomize", "--seed", "3"]
+# The suite's one small training run (tests/rl_small.py): 2 PPO iterations, one evaluation after them.
+TRAIN_ARGS = ["--timesteps", "64", "--evals", "1", *rl_small.TRAIN_ARGS]
 EVAL_KEYS = ("episodes", "success", "goals_per_episode", "keepout_entries", "collisions", "speed_excess_s", "speed_excess_after_clip_s",
              "speed_excess_outside_entry_s",
              "mean_return", "clipped_per_episode", "steps_per_episode", "seed", "map", "randomize", "device",
@@ -125,7 +127,7 @@ def test_train_writes_policy_results_and_curve(trained):
 def test_eval_json_has_the_figures(trained, capsys):
   out, _, _ = trained
   rc, stdout, stderr = run_cli(["rl", "eval", "--policy", str(out), "--episodes", "3", "--seed", "5",
-                                "--randomize", "--json"])
+                                "--randomize", "--layouts", str(rl_small.LAYOUTS), "--json"])
   assert rc == 0, stderr
   lines = stdout.strip().splitlines()
   assert len(lines) == 1

@@ -253,8 +253,13 @@ def test_cli_bench_without_harness(monkeypatch, capsys, keep_xla_flags):
 def test_large_batch_does_not_deadlock():
   """B = 1280 > 1200 robots in one scanned batch (the dense-jacobian LAPACK deadlock on CPU).
 
-  Runs in a subprocess with a timeout so a regression fails instead of hanging the suite:
-  the bare MJX step and the full fleet step (320 worlds x 4 robots), one env step each.
+  Runs in a subprocess with a timeout so a regression fails instead of hanging the suite: the
+  robot model keeps the sparse jacobian (the fix, sims/assets/planar_robot.xml) and the bare MJX
+  step of 1,280 robots runs one env step (20 physics steps). The fleet step vmaps the same
+  mjx.step of the same model over its W x K robots, so this is the batch that deadlocked; the
+  full fleet step at 1,280 robots (a program of its own, the larger part of this test's time) is
+  no longer compiled here, and its throughput beside the bare step's, a speed figure, is the
+  benchmarks' `fleet` entry (filters on and bare MJX, benchmarks/run.py).
   """
   code = textwrap.dedent("""
       import json, mujoco
@@ -264,16 +269,15 @@ def test_large_batch_does_not_deadlock():
       m = load_robot_model(FleetConfig())
       assert m.opt.jacobian == mujoco.mjtJacobian.mjJAC_SPARSE
       bare = fleet_throughput(1280, 20, filters=False, repeats=1)
-      full = fleet_throughput(1280, 20, filters=True, robots_per_world=4, repeats=1)
-      print(json.dumps([bare, full]))
+      print(json.dumps(bare))
   """)
   env = dict(os.environ)  # conftest already chose the XLA:CPU flags (jaxfilters/xla_flags.py)
   proc = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=300,
                         cwd=Path(__file__).resolve().parents[2], env=env)
   assert proc.returncode == 0, proc.stderr[-2000:]
-  bare, full = json.loads(proc.stdout.strip().splitlines()[-1])
-  assert bare["num_robots"] == full["num_robots"] == 1280
-  assert full["num_worlds"] == 320 and bare["robot_steps_per_s"] > full["robot_steps_per_s"] > 0
+  bare = json.loads(proc.stdout.strip().splitlines()[-1])
+  assert bare["num_robots"] == bare["num_worlds"] == 1280 and bare["physics_steps"] == 20
+  assert bare["robot_steps_per_s"] > 0
 
 
 def test_cli_bench_runs_the_harness(capsys, keep_xla_flags):

@@ -7,8 +7,9 @@ notebooks are never rewritten by the tests. Each notebook checks its own numbers
 independent reference in its cells (asserts), so a wrong result fails here as a cell error.
 
 The kernel gets JAXFILTERS_NOTEBOOK_QUICK=1: notebooks whose sweeps compile one program per
-setting (02, 03) then run fewer settings through the same cells; with the variable unset they run
-as committed.
+setting (02, 03) then run fewer settings through the same cells, and 04 trains with the suite's small
+run (tests/rl_small.py), whose programs the RL tests compile; with the variable unset they run as
+committed.
 """
 
 import base64
@@ -18,6 +19,8 @@ from pathlib import Path
 import nbformat
 import pytest
 from nbclient import NotebookClient
+
+from tests import rl_small
 
 ROOT = Path(__file__).resolve().parents[2]
 NOTEBOOKS = sorted((ROOT / "notebooks").glob("*.ipynb"))
@@ -54,6 +57,22 @@ def test_committed_with_outputs_that_read_on_a_code_host(path):
   images = _images(nb)
   assert images, "no figure in the committed outputs"
   assert all(len(png) < MAX_FIGURE_BYTES for png in images), [len(png) for png in images]
+
+
+@pytest.mark.parametrize("quick", [True, False])
+def test_rl_notebook_quick_run_is_the_suites_small_run(quick, monkeypatch):
+  """04's quick run trains with tests/rl_small.py's sizes (its programs are then the ones the RL tests
+  compile, shared through the session's compilation cache); its full run keeps the sizes it shows."""
+  monkeypatch.setenv("JAXFILTERS_NOTEBOOK_QUICK", "1" if quick else "0")
+  cell = next(c for c in nbformat.read(ROOT / "notebooks" / "04_rl.ipynb", as_version=4).cells
+              if c.cell_type == "code").source
+  scope = {}
+  exec(cell[:cell.index("import jax")], scope)    # noqa: S102 - the parameter lines, before anything is built
+  got = (scope["ENVS"], scope["NSTEPS"], scope["EPISODE_LENGTH"], scope["HIDDEN"], scope["NUM_EVAL"])
+  want = ((rl_small.NUM_ENVS, rl_small.NUM_STEPS, rl_small.EPISODE_LENGTH, rl_small.HIDDEN, rl_small.NUM_EVAL)
+          if quick else (16, 32, 100, (64, 64), 16))
+  assert got == want
+  assert "training_env(randomize=True, seed=0, layouts=4)" in cell and (rl_small.SEED, rl_small.LAYOUTS) == (0, 4)
 
 
 @pytest.mark.slow

@@ -1,6 +1,6 @@
 """sims/rl/env.py: the Playground contract, the speed clip, keepout/collision episodes, goals,
 navigation mode against FleetEnv, Brax/Playground wrappers with zone and goal randomisation,
-a few rejax PPO iterations, and the soak script.
+a few rejax PPO iterations (the suite's small training run, tests/rl_small.py), and the soak script.
 
 Jitted functions are shared through module fixtures (each distinct env compiles once).
 Robots are placed by editing `state.data.qpos` (same shapes: nothing recompiles), and
@@ -333,23 +333,26 @@ def test_brax_wrappers_with_zone_and_goal_randomisation():
 
 
 def test_ppo_iterations_train_the_policy():
-  from sims.rl.ppo import GymnaxAdapter, evaluate_policy, make_ppo, mean_policy
-  env = NavEnv.create()
-  adapter = GymnaxAdapter(env, episode_length=6)
-  algo = make_ppo(adapter, timesteps_per_call=3 * 4 * 8, num_envs=4, num_steps=8, num_epochs=2,
-                  num_minibatches=2, hidden=(16,))
+  # The suite's small training run (tests/rl_small.py): the programs `rl train` compiles for it,
+  # so the session's compilation cache compiles them once for the run.
+  from sims.rl.ppo import train_with_curve
+  from tests import rl_small
+  _, adapter, algo = rl_small.training_run()
+  key = jax.random.PRNGKey(0)
   with jax.numpy_rank_promotion("allow"):              # rejax broadcasts [N, D] - [D] internally
-    ts0 = algo.init_state(jax.random.PRNGKey(0))
-    ts = jax.jit(lambda ts: algo.train(train_state=ts)[0])(ts0)
-  assert int(ts.global_step) == 3 * 4 * 8                    # three PPO iterations
+    ts0 = jax.jit(algo.init_state)(jax.random.split(key)[0])    # the initial state train_with_curve starts from
+  ts, evals, _ = train_with_curve(adapter, algo, key, calls=[3], num_eval=rl_small.NUM_EVAL)
+  per_iter = rl_small.NUM_ENVS * rl_small.NUM_STEPS
+  assert int(ts.global_step) == 3 * per_iter                  # three PPO iterations
+  assert evals["env_steps"] == [0.0, 3.0 * per_iter]
   moved = jax.tree.map(lambda a, b: float(jnp.max(jnp.abs(a - b))), ts.actor_ts.params, ts0.actor_ts.params)
   assert max(jax.tree.leaves(moved)) > 1e-4
-  # Episodes ended by the 6-step limit were reset by the adapter (EpisodeWrapper counts steps).
-  assert np.all(np.asarray(ts.env_state.env_state.info["steps"]) < 6)
-  with jax.numpy_rank_promotion("allow"):
-    out = jax.jit(lambda k: evaluate_policy(adapter, mean_policy(algo, ts), k, 2))(jax.random.PRNGKey(1))
-  assert set(out) >= {"return", "success", "keepout_entries", "speed_violation_s"}
-  assert np.all(np.asarray(out["length"]) <= 6) and np.all(np.isfinite(np.asarray(out["return"])))
+  # Episodes ended by the step limit were reset by the adapter (EpisodeWrapper counts steps).
+  assert np.all(np.asarray(ts.env_state.env_state.info["steps"]) < rl_small.EPISODE_LENGTH)
+  # The evaluations before and after training: every figure, finite, episodes within the limit.
+  assert set(evals) >= {"return", "success", "keepout_entries", "speed_violation_s", "length"}
+  assert all(len(v) == 2 and np.all(np.isfinite(v)) for v in evals.values())
+  assert all(1 <= n <= rl_small.EPISODE_LENGTH for n in evals["length"])
 
 
 def test_soak_short():

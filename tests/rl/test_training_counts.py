@@ -1,8 +1,9 @@
 """Training counts: --timesteps and --evals do what the help text says, and the env steps reported
 (results.json, the curve, the progress lines) are the ones the device counted.
 
-One tiny run (4 envs x 8 steps, one hidden layer of 8, 4-step episodes) goes through the command
-line; the plan and the refusals are plain arithmetic.
+One tiny run goes through the command line (tests/rl_small.py's: 4 envs x 8 steps, one hidden layer
+of 16, 6-step episodes, the programs tests/commands/test_rl.py's run compiles); the plan and the
+refusals are plain arithmetic.
 """
 
 from __future__ import annotations
@@ -12,6 +13,7 @@ import json
 import pytest
 
 from sims.rl.ppo import MAX_ENV_STEPS, plan_training
+from tests import rl_small
 from tests.cli_run import run_cli
 
 
@@ -54,9 +56,9 @@ def test_huge_timesteps_exit_2_before_anything_is_built(tmp_path):
 
 def test_timesteps_and_evals_do_what_the_help_says(tmp_path):
   out = tmp_path / "pol"
-  rc, stdout, stderr = run_cli(["rl", "train", "--timesteps", "80", "--evals", "2", "--num-envs", "4",
-                                "--num-steps", "8", "--minibatches", "2", "--episode-length", "4",
-                                "--num-eval", "2", "--hidden", "8", "--seed", "1", "--out", str(out)])
+  # The suite's small run (4 envs x 8 steps: 32 env steps per PPO iteration), whose programs are compiled once.
+  rc, stdout, stderr = run_cli(["rl", "train", "--timesteps", "80", "--evals", "2", *rl_small.TRAIN_ARGS,
+                                "--out", str(out)])
   assert rc == 0, stderr
   res = json.loads((out / "results.json").read_text())
   assert res["env_steps"] == 96                             # 80 rounded up to 3 iterations of 32
