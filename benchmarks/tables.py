@@ -198,7 +198,8 @@ def rl_train_rows(run: dict, seen: set) -> list[list[str]]:
   """Rows of a `jaxfilters rl train` run (its results.json timing) and, with `devices_1`, the same
   command on one device of the same machine (the scaling baseline)."""
   f = run["figures"]
-  key = f"rl_train_{f['devices']}"
+  k = f.get("robots_per_world", 1)
+  key = f"rl_train_{f['devices']}" + (f"_k{k}" if k > 1 else "")
   if key in seen:
     return []
   seen.add(key)
@@ -208,13 +209,26 @@ def rl_train_rows(run: dict, seen: set) -> list[list[str]]:
   if "devices_1" in f:
     one = f["devices_1"]["env_steps_per_s"]
     base.append(f"1 device, same call: {rate(one, 'env-steps/s')} (x{num(t['env_steps_per_s'] / one)})")
-  if ev:
+  if ev and k > 1:
+    base.append(f"eval at K = {k}, {ev['robot_episodes']:,} robot-episodes, new layouts: {num(100 * ev['success'])} % "
+                f"reach a goal, {ev['keepout_entries']} keepout entries, "
+                f"{num(ev['robot_collisions_per_robot_episode'])} robot collisions per robot-episode, "
+                f"{num(ev['speed_excess_outside_entry_s'])} s above a limit outside entry ticks")
+  elif ev:
     base.append(f"eval {ev['episodes']:,} episodes, new layouts: {num(100 * ev['success'])} % success, "
                 f"{ev['keepout_entries']} keepout entries, {ev['collisions']} collisions"
                 + (f", {num(ev['speed_excess_outside_entry_s'])} s above a limit outside entry ticks"
                    if "speed_excess_outside_entry_s" in ev else ""))
   label = (f"PPO to a policy (`jaxfilters rl train --randomize{f.get('flags', '')}`)" if f["devices"] == 1 else
            f"PPO over {f['devices']} GPUs, env batch sharded (`rl train --devices {f['devices']}`)")
+  if k > 1:
+    return [[f"PPO, one policy for every robot (`jaxfilters rl train --robots-per-world {k} --randomize"
+             f"{f.get('flags', '')}`)",
+             f"{f['envs']:,} worlds x {k} robots x {f['rollout_steps']} steps, {num(f['env_steps'] / 1e6)} M world "
+             f"steps = {num(k * f['env_steps'] / 1e6)} M robot-steps", seconds(t["compile_s"], 0),
+             f"{num(t['train_s'])} s train, {num(t['wall_s'])} s wall"
+             + (f", {num(t['process_s'])} s interpreter start to exit" if "process_s" in t else ""),
+             f"**{rate(k * t['env_steps_per_s'], 'robot-steps/s')}**", "; ".join(base), "", run["id"]]]
   rows = [[label, f"{f['envs']:,} envs x {f['rollout_steps']} steps, {num(f['env_steps'] / 1e6)} M env steps",
            seconds(t["compile_s"], 0),
            f"{num(t['train_s'])} s train, {num(t['wall_s'])} s wall"
