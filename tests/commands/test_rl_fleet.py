@@ -7,31 +7,16 @@ the module; it is evaluated at K = 3.
 
 from __future__ import annotations
 
-import contextlib
-import io
 import json
-import os
 
 import pytest
 
-from jaxfilters import cli
 from sims.rl import policy as P
-from tests.commands.test_rl import rl_entry_point, write_policy  # noqa: F401  (fixture)
+# keep_xla_flags is autouse: imported, it restores XLA_FLAGS around this module's tests too.
+from tests.commands.test_rl import keep_xla_flags, rl_entry_point, run_cli, write_policy  # noqa: F401  (fixtures)
 
 TRAIN = ["rl", "train", "--timesteps", "16", "--num-envs", "2", "--num-steps", "4", "--episode-length", "4",
          "--evals", "1", "--num-eval", "1", "--hidden", "8", "--minibatches", "2", "--seed", "2"]
-
-
-@pytest.fixture(autouse=True)
-def keep_xla_flags(monkeypatch):
-  monkeypatch.setenv("XLA_FLAGS", os.environ.get("XLA_FLAGS", ""))
-
-
-def run_cli(argv) -> tuple[int, str, str]:
-  out, err = io.StringIO(), io.StringIO()
-  with contextlib.redirect_stdout(out), contextlib.redirect_stderr(err):
-    rc = cli.main(argv)
-  return rc, out.getvalue(), err.getvalue()
 
 
 @pytest.fixture(scope="module")
