@@ -5,14 +5,10 @@ runs (10**5 inputs and more) are the same code with a larger --count."""
 from __future__ import annotations
 
 import random
-import subprocess
-import sys
-from pathlib import Path
 
 from sims.rl import policy as P
 from tests.fuzz import fuzz_policy
-
-REPO = Path(__file__).resolve().parents[2]
+from tests.fuzz.sandboxed import run_target
 
 
 def test_mutated_policy_json_loads_within_the_bounds_or_is_refused():
@@ -33,10 +29,6 @@ def test_mutated_policy_json_loads_within_the_bounds_or_is_refused():
 
 
 def test_the_sandboxed_fuzzer_runs_policy_json(tmp_path):
-  run = subprocess.run([sys.executable, "-m", "tests.fuzz.fuzz_inputs", "--count", "150", "--workers", "1",
-                        "--targets", "policy-json", "--out", str(tmp_path / "f")], cwd=REPO,
-                       capture_output=True, text=True, timeout=300)
-  assert run.returncode == 0, run.stdout + run.stderr
-  lines = run.stdout.splitlines()
+  lines = run_target("policy-json", tmp_path / "f")
   assert lines[1].split()[:2] == ["policy-json", "150"]
   assert "150 inputs in" in lines[2] and "failures: 0" in lines[2]

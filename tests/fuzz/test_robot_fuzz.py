@@ -5,14 +5,10 @@ and a short run of the sandboxed fuzzer (`python -m tests.fuzz.fuzz_inputs --tar
 from __future__ import annotations
 
 import random
-import subprocess
-import sys
-from pathlib import Path
 
 from sims.fleet import robot as R
 from tests.fuzz import fuzz_inputs, fuzz_robot
-
-REPO = Path(__file__).resolve().parents[2]
+from tests.fuzz.sandboxed import run_target
 
 
 def test_every_seed_loads():
@@ -45,10 +41,6 @@ def test_every_mjcf_mutation_kind_runs():
 
 
 def test_the_sandboxed_fuzzer_runs_robots(tmp_path):
-  run = subprocess.run([sys.executable, "-m", "tests.fuzz.fuzz_inputs", "--count", "150", "--workers", "1",
-                        "--targets", "robot", "--out", str(tmp_path / "f")], cwd=REPO,
-                       capture_output=True, text=True, timeout=300)
-  assert run.returncode == 0, run.stdout + run.stderr
-  lines = run.stdout.splitlines()
+  lines = run_target("robot", tmp_path / "f")
   assert lines[1].split()[:2] == ["robot", "150"]
   assert "150 inputs in" in lines[2] and "failures: 0" in lines[2]
