@@ -80,33 +80,33 @@ def test_eager_call_redoes_the_open_robots_exactly(config):
   _assert_equal(_eager(case, config), _exact(case, config))
 
 
+def _host_redo_programs(config, monkeypatch) -> list[bool]:
+  """The edge fleet's eager call with its open robots redone on the host: asserts the exact path's
+  integers and returns `exact` of each `process.exact_redo` call (True: the exact per-cell path)."""
+  case = _edges()
+  monkeypatch.setattr(process, "HOST_REDO_MAX_FRACTION", 1.0)
+  ran = []
+  real = process.exact_redo
+  monkeypatch.setattr(process, "exact_redo", lambda *a, **k: ran.append(k["exact"]) or real(*a, **k))
+  _assert_equal(_eager(case, config), _exact(case, config))
+  return ran
+
+
 @pytest.mark.parametrize("config", [PLAIN, ESCAPE], ids=["plain", "escape"])
 def test_a_larger_host_redo_runs_the_fast_path_with_its_exact_reruns(config, monkeypatch):
   """Past EXACT_PATH_REDO_MAX open robots the host redo runs the jitted program (exact reruns in
   it), not the exact path; the integers are the exact path's either way."""
   if jax.default_backend() != "cpu":
     pytest.skip("off a CPU the open robots are redone on the device, never on the host")
-  case = _edges()
-  monkeypatch.setattr(process, "HOST_REDO_MAX_FRACTION", 1.0)
   monkeypatch.setattr(process, "EXACT_PATH_REDO_MAX", 0)
-  ran = []
-  real = process.exact_redo
-  monkeypatch.setattr(process, "exact_redo", lambda *a, **k: ran.append(k["exact"]) or real(*a, **k))
-  _assert_equal(_eager(case, config), _exact(case, config))
-  assert ran == [False]
+  assert _host_redo_programs(config, monkeypatch) == [False]
 
 
 @pytest.mark.parametrize("config", [PLAIN, ESCAPE], ids=["plain", "escape"])
 def test_a_small_host_redo_runs_the_exact_path(config, monkeypatch):
   if jax.default_backend() != "cpu":
     pytest.skip("off a CPU the open robots are redone on the device, never on the host")
-  case = _edges()
-  monkeypatch.setattr(process, "HOST_REDO_MAX_FRACTION", 1.0)
-  ran = []
-  real = process.exact_redo
-  monkeypatch.setattr(process, "exact_redo", lambda *a, **k: ran.append(k["exact"]) or real(*a, **k))
-  _assert_equal(_eager(case, config), _exact(case, config))
-  assert ran == [True]
+  assert _host_redo_programs(config, monkeypatch) == [True]
 
 
 @pytest.mark.parametrize("config", [PLAIN, ESCAPE], ids=["plain", "escape"])
