@@ -32,7 +32,7 @@ from gymnax.environments import spaces
 
 from sims.rl.adapter import GymnaxAdapter
 from sims.rl.env import NavEnv
-from sims.rl.ppo import EVAL_KEYS, make_ppo
+from sims.rl.ppo import EVAL_KEYS, episode_sums, make_ppo
 
 _F32 = jnp.float32
 FLEET_EVAL_KEYS = EVAL_KEYS + ("robot_collisions",)
@@ -178,30 +178,7 @@ def evaluate_fleet_policy(adapter: FleetAdapter, act: Callable, key: jax.Array, 
     `sims.rl.ppo.evaluate_policy`'s, plus robot_collisions (1 where the episode ended in a
     robot-robot contact); success = a goal reached before the robot's episode ended.
   """
-  env = adapter.env
-  k = env.num_robots
-
-  def one(key_world):
-    k_model, k_reset = jax.random.split(key_world)
-    model = adapter.draw_model(k_model)
-    st = adapter.run_with_model(model, lambda: env.reset(k_reset))
-
-    def body(carry, _):
-      st, alive, acc = carry
-      nst = adapter.run_with_model(model, lambda: env.step(st, act(st.obs)))
-      m = nst.metrics
-      add = {n: m[n] for n in FLEET_EVAL_KEYS if n in m}
-      add.update({"return": nst.reward, "bad_action": (m["bad_action"] > 0).astype(_F32),
-                  "length": jnp.ones((k,), _F32)})
-      acc = {n: acc[n] + jnp.where(alive, add[n], 0.0) for n in acc}
-      return (nst, alive & (nst.done == 0), acc), None
-
-    acc0 = {n: jnp.zeros((k,), _F32) for n in FLEET_EVAL_KEYS if n != "success"}
-    (_, _, acc), _ = jax.lax.scan(body, (st, jnp.ones((k,), bool), acc0), None, length=adapter.episode_length)
-    acc["success"] = (acc["goals_reached"] > 0).astype(_F32)
-    return acc
-
-  out = jax.vmap(one)(jax.random.split(key, num_eval))
+  out = episode_sums(adapter, adapter.env, act, key, num_eval, FLEET_EVAL_KEYS, (adapter.env.num_robots,))
   return {n: v.reshape(-1) for n, v in out.items()}
 
 

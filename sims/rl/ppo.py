@@ -70,26 +70,39 @@ def evaluate_policy(adapter: GymnaxAdapter, act: Callable, key: jax.Array, num_e
     one goal reached before the episode ended; bad_action = steps whose action had a NaN or
     a value outside [-1, 1], which the env replaced by 0 or clipped).
   """
+  return episode_sums(adapter, adapter.wrapped, act, key, num_eval, EVAL_KEYS, ())
+
+
+def episode_sums(adapter: GymnaxAdapter, env, act: Callable, key: jax.Array, num_eval: int,
+                 keys: tuple[str, ...], shape: tuple[int, ...]) -> dict:
+  """Per-episode sums of `keys` over one episode of `adapter.episode_length` steps on each of `num_eval` envs.
+
+  Each env draws its model (`adapter.draw_model`), resets `env` and steps it with `act(obs)`; a step
+  counts while no earlier step of its episode was done. `shape` is that of the env's reward and
+  done: () for one agent per env, (K,) for one per robot (`sims.rl.fleet`). The sums are the env's
+  metrics of those names, plus return (the reward), bad_action (steps whose action was replaced or
+  clipped), length (steps) and success (a goal reached). Jittable.
+
+  Returns:
+    dict of float32 [num_eval, *shape], one entry per name in `keys`.
+  """
   def one(k):
     k_model, k_reset = jax.random.split(k)
     model = adapter.draw_model(k_model)
-    st = adapter.run_with_model(model, lambda: adapter.wrapped.reset(k_reset))
+    st = adapter.run_with_model(model, lambda: env.reset(k_reset))
 
     def body(carry, _):
       st, alive, acc = carry
-      nst = adapter.run_with_model(model, lambda: adapter.wrapped.step(st, act(st.obs)))
+      nst = adapter.run_with_model(model, lambda: env.step(st, act(st.obs)))
       m = nst.metrics
-      add = {"return": nst.reward, "goals_reached": m["goals_reached"], "keepout_entries": m["keepout_entries"],
-             "collisions": m["collisions"], "speed_violation_s": m["speed_violation_s"],
-             "speed_violation_after_clip_s": m["speed_violation_after_clip_s"],
-             "speed_violation_outside_entry_s": m["speed_violation_outside_entry_s"],
-             "costmap_stops": m["costmap_stops"], "bad_action": (m["bad_action"] > 0).astype(_F32),
-             "clipped": m["clipped"], "length": jnp.ones((), _F32)}
+      add = {n: m[n] for n in keys if n in m}
+      add.update({"return": nst.reward, "bad_action": (m["bad_action"] > 0).astype(_F32),
+                  "length": jnp.ones(shape, _F32)})
       acc = {n: acc[n] + jnp.where(alive, add[n], 0.0) for n in acc}
       return (nst, alive & (nst.done == 0), acc), None
 
-    acc0 = {n: jnp.zeros((), _F32) for n in EVAL_KEYS if n != "success"}
-    (_, _, acc), _ = jax.lax.scan(body, (st, jnp.asarray(True), acc0), None, length=adapter.episode_length)
+    acc0 = {n: jnp.zeros(shape, _F32) for n in keys if n != "success"}
+    (_, _, acc), _ = jax.lax.scan(body, (st, jnp.ones(shape, bool), acc0), None, length=adapter.episode_length)
     acc["success"] = (acc["goals_reached"] > 0).astype(_F32)
     return acc
 
