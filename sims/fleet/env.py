@@ -410,7 +410,7 @@ class FleetEnv:
         state.keepout, n=self.world.window_cells, robot_radius=cfg.robot.radius,
         inflation=self.world.inflation, keepout_config=self.world.keepout_config,
         layers=self.world.local_inflation_layers, paths=paths, path_lengths=lengths,
-        direction=p.direction, honour_lanes=p.honour_lanes)
+        direction=p.direction, honour_lanes=p.honour_lanes, grid=self.world.keepout_grid)
     return dataclasses.replace(state, local=local, keepout=kstate,
                                plan_lut=jax.vmap(planner.lookup_table)(local.cost))
 

@@ -40,7 +40,7 @@ from jaxfilters.inflation import InflationConfig, inflate
 from jaxfilters.keepout import KeepoutConfig, KeepoutState, keepout_filter
 from jaxfilters.static_layer import StaticLayerConfig, static_layer
 from jaxfilters.types import Costmap, FilterInfo, FilterMask, pytree_dataclass
-from sims.fleet import navigation
+from sims.fleet import local_costmap, navigation
 from sims.fleet.config import FleetConfig
 from sims.fleet.scenario import Scenario, speed_limit_host
 
@@ -118,6 +118,8 @@ class World:
       (`local_layers`); empty: `(inflation,)`.
     plan_points: P, the points of each robot's plan (`navigation.trace_plan`,
       one per navigation cell) when an AsymmetricInflationLayer is configured; 0 otherwise.
+    keepout_grid: the keepout mask on the map's grid (`local_costmap.keepout_grid`): the local
+      costmaps read its cells as integers (`local_costmap.grid_keepout`); None: `keepout_filter`.
   """
   scenario: Scenario
   config: FleetConfig
@@ -136,6 +138,7 @@ class World:
   zone_spawns: np.ndarray = dataclasses.field(default_factory=lambda: np.zeros((0, 2), np.float32))
   local_layers: tuple[InflationConfig | AsymmetricInflationConfig, ...] = ()
   plan_points: int = 0
+  keepout_grid: local_costmap.KeepoutGrid | None = None
 
   @property
   def local_inflation_layers(self) -> tuple[InflationConfig | AsymmetricInflationConfig, ...]:
@@ -509,7 +512,9 @@ def build_world(scenario: Scenario, config: FleetConfig, *, seed: int = 0) -> Wo
                window_cells=n, pad=pad, nav_factor=factor, zone_labels=labels,
                zone_limits=raw_limits, zone_speed=speeds, stations=stations, spawns=spawns,
                keepout_config=keepout_cfg, zone_spawns=np.asarray(zone_spawns, np.float32).reshape(-1, 2),
-               local_layers=layers, plan_points=_plan_points(layers, config, nav_res))
+               local_layers=layers, plan_points=_plan_points(layers, config, nav_res),
+               keepout_grid=local_costmap.keepout_grid(params.map_origin, params.map_resolution, keepout,
+                                                       (-pad, padded.shape[1] - 2 * pad), (-pad, padded.shape[0] - 2 * pad)))
 
 
 def _plan_points(layers, config: FleetConfig, step: float) -> int:
