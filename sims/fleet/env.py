@@ -252,7 +252,10 @@ class FleetEnv:
       params: WorldParams with the same shapes as `self.params`.
 
     Returns:
-      A new FleetEnv; self is unchanged.
+      A new FleetEnv; self is unchanged. Where the world reads its keepout mask on the map's
+      grid (`world.keepout_grid`), a keepout mask or map of other geometry in `params` is not
+      read: every robot's `keepout.error` is True and no zone is written (build a new FleetEnv
+      for it).
     """
     return dataclasses.replace(self, params=params)
 
