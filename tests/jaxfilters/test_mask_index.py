@@ -63,3 +63,34 @@ def test_jitted_out_of_range_mask_index_is_masked_and_flagged(name):
   if name == "zone":
     np.testing.assert_array_equal(np.asarray(res.zone), [100, 0, 40, 0])
 
+
+
+def _lowered_text(name):
+  """StableHLO of a jitted reader of a 2-mask stack of 6 x 7 cells at 3 points, each with its own mask."""
+  grids = [_grid(np.full((6, 7), v, np.int8)) for v in (100, 40)]
+  info = {"keepout": jf.FilterInfo.create(0), "speed": jf.FilterInfo.create(1, 100.0, -1.0),
+          "binary": jf.FilterInfo.create(3), "zone": jf.FilterInfo.create(4)}
+  kind = name.split("_")[0]
+  mask = jf.FilterMask.create(grids, info[kind])
+  table = jf.ZoneTable.create(["v"], {"v": 1.0}, {100: {"v": 2.0}, 40: {"v": 3.0}})
+  poses = jnp.full((3, 3), 1.5, jnp.float32)
+  fns = {
+      "keepout_at": lambda m, i: jf.keepout_cost_at(m, poses[:, :2], mask_index=i),
+      "speed_at": lambda m, i: jf.speed_limit_at(m, poses[:, :2], mask_index=i),
+      "binary_at": lambda m, i: jf.binary_at(m, poses[:, :2], mask_index=i),
+      "zone_at": lambda m, i: jf.zone_at(m, poses[:, :2], mask_index=i),
+      "speed_filter": lambda m, i: jf.speed_filter(m, poses, jf.SpeedState.create(3), mask_index=i),
+      "binary_filter": lambda m, i: jf.binary_filter(m, poses, jf.BinaryState.create(3), mask_index=i),
+      "zone_filter": lambda m, i: jf.zone_filter(m, poses, jf.ZoneState.create(table, 3), table, mask_index=i),
+  }
+  return jax.jit(fns[name]).lower(mask, jnp.asarray([0, 1, 0], jnp.int32)).as_text()
+
+
+@pytest.mark.parametrize("name", ["keepout_at", "speed_at", "binary_at", "zone_at", "speed_filter", "binary_filter",
+                                  "zone_filter"])
+def test_per_point_readers_gather_cells_not_whole_masks(name):
+  # mask_lookup.MaskView: a point reads stack[i, my, mx]; a [6, 7] slice per point would be a copy of
+  # the mask per point (constant-folded at compile time where the caller closes over the stack).
+  text = _lowered_text(name)
+  assert "gather" in text
+  assert "slice_sizes = array<i64: 1, 6, 7>" not in text
