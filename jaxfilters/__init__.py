@@ -3,7 +3,15 @@
 Layers, types -> geometry -> filters -> pipelines: imports run one way. Each
 filter is written for one robot (`*_one`) and vmapped once at the public edge;
 public functions take an explicit leading robot axis B.
+
+Importing the package picks XLA:CPU's classic fusion emitters on jaxlib 0.10 (`xla_flags`), the
+setting the test suite and the commands run with, unless XLA_FLAGS already names them; it takes
+effect where no JAX backend has started yet in the process.
 """
+
+from jaxfilters import xla_flags
+
+xla_flags.use_fast_cpu_compile()   # first: before anything below can start a JAX backend
 
 from jaxfilters import constants, jaus, ros
 from jaxfilters._version import __version__

@@ -5,6 +5,10 @@ With jaxlib 0.10 the new emitter recomputes the keepout filter's exact cell-inde
 arithmetic inside every fused output cell (8.5 ms vs 0.17 ms on [8, 60, 60]) and
 compiles the fleet step ~35 % slower. Newer XLA releases removed the flag and
 abort on unknown flags (jaxlib 0.11.2 does), so it is only set on jaxlib 0.10.x.
+
+`import jaxfilters` calls `use_fast_cpu_compile` first thing, so a notebook or a pipeline
+runs what the test suite and the commands run; it takes effect where no JAX backend has
+started in the process yet (XLA reads the flags once, when the first backend starts).
 """
 
 from __future__ import annotations
