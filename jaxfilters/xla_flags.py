@@ -9,6 +9,8 @@ abort on unknown flags (jaxlib 0.11.2 does), so it is only set on jaxlib 0.10.x.
 `import jaxfilters` calls `use_fast_cpu_compile` first thing, so a notebook or a pipeline
 runs what the test suite and the commands run; it takes effect where no JAX backend has
 started in the process yet (XLA reads the flags once, when the first backend starts).
+Like any environment variable it is inherited by child processes: a child running a
+newer jaxlib (which aborts on the flag) needs XLA_FLAGS without it.
 """
 
 from __future__ import annotations
