@@ -36,3 +36,25 @@ def count_compiles() -> Iterator[Callable[[], int]]:
   """Yields a function that returns the compilations since the block started."""
   start = _count[0]
   yield lambda: _count[0] - start
+
+
+CACHE_MISS_EVENT = "/jax/compilation_cache/cache_misses"
+_misses = [0]
+
+
+def _event_listener(event: str, **kwargs) -> None:
+  del kwargs
+  if event == CACHE_MISS_EVENT:
+    _misses[0] += 1
+
+
+jax.monitoring.register_event_listener(_event_listener)
+
+
+@contextlib.contextmanager
+def count_cache_misses() -> Iterator[Callable[[], int]]:
+  """Yields a function that returns the persistent compilation cache's misses since the block started
+  (a program looked up in the cache folder and not found there; programs JAX finds in its in-memory
+  caches are not looked up at all)."""
+  start = _misses[0]
+  yield lambda: _misses[0] - start

@@ -522,13 +522,17 @@ def run_eval(args) -> int:
   # The first observations of the episodes about to run: a policy whose (unclipped) mean action is
   # NaN or inf there has weights that overflow float32; the env would zero its NaN actions and the
   # figures would describe a robot at rest.
-  finite = np.asarray(jax.jit(lambda k: first_actions_finite(adapter, policy.raw_action, k, args.episodes))(key))
+  # The weights go into both programs as arguments, not as constants: the compilation cache then
+  # serves every policy of the same architecture on the same env (a new checkpoint compiles nothing).
+  weights = lambda p: dataclasses.replace(policy, params=p)
+  finite = np.asarray(jax.jit(lambda k, p: first_actions_finite(adapter, weights(p).raw_action, k, args.episodes))(
+      key, policy.params))
   if not finite.all():
     raise CliError(f"--policy {args.policy}: the policy's actions are not finite (NaN or inf) on "
                    f"{int((~finite).sum())} of the {args.episodes} episodes' first observations (its weights "
                    "overflow float32); nothing evaluated")
   with jax.numpy_rank_promotion("allow"):
-    per_episode = jax.jit(lambda k: evaluate(adapter, policy.act, k, args.episodes))(key)
+    per_episode = jax.jit(lambda k, p: evaluate(adapter, weights(p).act, k, args.episodes))(key, policy.params)
   m = {k: np.asarray(v, np.float64) for k, v in jax.device_get(per_episode).items()}
   result = {
       "episodes": args.episodes,

@@ -32,6 +32,7 @@ import pytest
 from jaxfilters import cli
 from sims.rl import policy as P
 from tests import rl_small
+from tests.compile_count import count_cache_misses
 
 REPO = Path(__file__).resolve().parents[2]
 ASSETS = REPO / "sims" / "assets"
@@ -140,6 +141,26 @@ def test_eval_json_has_the_figures(trained, capsys):
   assert isinstance(res["keepout_entries"], int) and isinstance(res["collisions"], int)
   assert 1 <= res["steps_per_episode"] <= 6
   assert all(math.isfinite(res[k]) for k in ("mean_return", "goals_per_episode", "clipped_per_episode"))
+
+
+def test_eval_of_another_checkpoint_of_the_same_network_compiles_nothing(tmp_path, rl_entry_point):
+  # `rl eval` passes the weights to its programs as arguments, not as constants: a second policy of
+  # the same architecture on the same env finds every program in the compilation cache.
+  argv = lambda p: ["rl", "eval", "--policy", str(p), "--episodes", "2", "--episode-length", "3", "--seed", "3",
+                    "--json"]
+  first, second = write_policy(tmp_path / "a", seed=1), write_policy(tmp_path / "b", seed=2)
+  old = jax.config.jax_persistent_cache_min_compile_time_secs
+  jax.config.update("jax_persistent_cache_min_compile_time_secs", 0.0)     # keep every program, however quick
+  try:
+    rc, out_a, stderr = run_cli(argv(first))
+    assert rc == 0, stderr
+    with count_cache_misses() as misses:
+      rc, out_b, stderr = run_cli(argv(second))
+    assert rc == 0, stderr
+  finally:
+    jax.config.update("jax_persistent_cache_min_compile_time_secs", old)
+  assert misses() == 0
+  assert json.loads(out_a)["mean_return"] != json.loads(out_b)["mean_return"]     # other weights, other actions
 
 
 def test_four_devices_shard_the_env_batch_and_learn_the_same(trained, four_devices):
