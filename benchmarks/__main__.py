@@ -1,9 +1,6 @@
 import sys
 
-from jaxfilters import xla_flags
-
-# Before JAX starts (see jaxfilters/xla_flags.py).
-xla_flags.use_fast_cpu_compile()
+import jaxfilters  # noqa: F401  (first: importing it sets the XLA:CPU flags, jaxfilters/xla_flags.py)
 
 from benchmarks.run import main  # noqa: E402
 

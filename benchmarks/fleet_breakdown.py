@@ -45,9 +45,7 @@ from pathlib import Path
 if __package__ in (None, ""):
   sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
-from jaxfilters import xla_flags  # noqa: E402
-
-xla_flags.use_fast_cpu_compile()
+import jaxfilters  # noqa: F401  (first: importing it sets the XLA:CPU flags, jaxfilters/xla_flags.py)
 
 import jax  # noqa: E402
 import jax.numpy as jnp  # noqa: E402

@@ -30,9 +30,7 @@ import math
 import sys
 import time
 
-from jaxfilters import xla_flags
-
-xla_flags.use_fast_cpu_compile()
+import jaxfilters  # noqa: F401  (first: importing it sets the XLA:CPU flags, jaxfilters/xla_flags.py)
 
 import jax  # noqa: E402
 import jax.numpy as jnp  # noqa: E402

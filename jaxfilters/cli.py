@@ -30,7 +30,7 @@ import re
 import sys
 import traceback
 
-from jaxfilters import compile_cache, xla_flags
+from jaxfilters import compile_cache
 from jaxfilters._version import __version__
 
 ENTRY_POINT_GROUP = "jaxfilters.commands"
@@ -114,7 +114,6 @@ def _add_no_cache(parser: argparse.ArgumentParser) -> None:
 def main(argv=None) -> int:
   """Entry point of the `jaxfilters` console script; returns the exit code."""
   argv = list(sys.argv[1:] if argv is None else argv)
-  xla_flags.use_fast_cpu_compile()   # before any JAX backend starts
   parser = build_parser()
   try:
     args, extra = parser.parse_known_args(argv)

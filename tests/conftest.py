@@ -27,10 +27,7 @@ if os.environ.get(SESSION_CACHE_ENV) is None:       # the first pytest process: 
   os.environ["JAX_PERSISTENT_CACHE_MIN_COMPILE_TIME_SECS"] = "0.5"
   os.environ["JAX_PERSISTENT_CACHE_MIN_ENTRY_SIZE_BYTES"] = "-1"
 
-from jaxfilters import xla_flags  # noqa: E402
-
-# Before JAX starts (see jaxfilters/xla_flags.py); the CLI and the benchmarks do the same.
-xla_flags.use_fast_cpu_compile()
+import jaxfilters  # noqa: F401  (first: importing it sets the XLA:CPU flags, jaxfilters/xla_flags.py)
 
 import jax  # noqa: E402
 import pytest

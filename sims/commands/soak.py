@@ -24,9 +24,7 @@ import json
 import sys
 import time
 
-from jaxfilters import xla_flags
-
-xla_flags.use_fast_cpu_compile()
+import jaxfilters  # noqa: F401  (first: importing it sets the XLA:CPU flags, jaxfilters/xla_flags.py)
 
 import jax  # noqa: E402
 import numpy as np  # noqa: E402

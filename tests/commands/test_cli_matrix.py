@@ -19,12 +19,6 @@ REPO = Path(__file__).resolve().parents[2]
 ASSETS = REPO / "sims" / "assets"
 
 
-@pytest.fixture(autouse=True)
-def keep_xla_flags(monkeypatch):
-  """cli.main may add to XLA_FLAGS; restore it so later subprocesses see the suite's own value."""
-  monkeypatch.setenv("XLA_FLAGS", os.environ.get("XLA_FLAGS", ""))
-
-
 def _files(tmp_path: Path) -> dict:
   """Inputs named in the matrix: {name: path}."""
   ok = tmp_path / "ok.csv"

@@ -1,7 +1,6 @@
 """The command line: one-line errors naming the option or file, distinct exit codes, no traceback."""
 
 import json
-import os
 import subprocess
 import sys
 from pathlib import Path
@@ -12,12 +11,6 @@ from jaxfilters import cli
 from jaxfilters._version import __version__
 
 REPO = Path(__file__).resolve().parents[2]
-
-
-@pytest.fixture(autouse=True)
-def keep_xla_flags(monkeypatch):
-  """cli.main may add to XLA_FLAGS; restore it so later subprocesses see the suite's own value."""
-  monkeypatch.setenv("XLA_FLAGS", os.environ.get("XLA_FLAGS", ""))
 
 
 BAD_FLEET = [

@@ -2,21 +2,12 @@
 simulated; a good one runs in the fleet with its radius and drive in the summary."""
 
 import json
-import os
 from pathlib import Path
-
-import pytest
 
 from jaxfilters import cli
 
 REPO = Path(__file__).resolve().parents[2]
 OMNI = REPO / "examples" / "robots" / "omni_base.xml"
-
-
-@pytest.fixture(autouse=True)
-def keep_xla_flags(monkeypatch):
-  """cli.main may add to XLA_FLAGS; restore it so later subprocesses see the suite's own value."""
-  monkeypatch.setenv("XLA_FLAGS", os.environ.get("XLA_FLAGS", ""))
 
 
 def _bad_files(tmp: Path) -> list[tuple[Path, str]]:

@@ -66,12 +66,6 @@ def rl_entry_point(tmp_path_factory) -> str:
   sys.path.remove(str(root))
 
 
-@pytest.fixture(autouse=True)
-def keep_xla_flags(monkeypatch):
-  """cli.main may add to XLA_FLAGS; restore it so later subprocesses see the suite's own value."""
-  monkeypatch.setenv("XLA_FLAGS", os.environ.get("XLA_FLAGS", ""))
-
-
 def run_cli(argv) -> tuple[int, str, str]:
   out, err = io.StringIO(), io.StringIO()
   with contextlib.redirect_stdout(out), contextlib.redirect_stderr(err):

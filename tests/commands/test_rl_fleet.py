@@ -12,8 +12,7 @@ import json
 import pytest
 
 from sims.rl import policy as P
-# keep_xla_flags is autouse: imported, it restores XLA_FLAGS around this module's tests too.
-from tests.commands.test_rl import keep_xla_flags, rl_entry_point, run_cli, write_policy  # noqa: F401  (fixtures)
+from tests.commands.test_rl import rl_entry_point, run_cli, write_policy  # noqa: F401  (fixtures)
 
 TRAIN = ["rl", "train", "--timesteps", "16", "--num-envs", "2", "--num-steps", "4", "--episode-length", "4",
          "--evals", "1", "--num-eval", "1", "--hidden", "8", "--minibatches", "2", "--seed", "2"]

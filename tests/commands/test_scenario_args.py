@@ -1,7 +1,6 @@
 """`--params` gives the fleet its local costmap's inflation layers (Scenario.layers); what the fleet
 cannot run is a one-line usage error."""
 
-import os
 from pathlib import Path
 
 import pytest
@@ -12,12 +11,6 @@ from sims.commands import scenario_args
 
 ASSETS = Path(__file__).resolve().parents[2] / "sims" / "assets"
 LANES = ASSETS / "nav2_params_lanes.yaml"
-
-
-@pytest.fixture(autouse=True)
-def keep_xla_flags(monkeypatch):
-  """cli.main may add to XLA_FLAGS; restore it so later subprocesses see the suite's own value."""
-  monkeypatch.setenv("XLA_FLAGS", os.environ.get("XLA_FLAGS", ""))
 
 
 def _scenario(*argv):

@@ -205,13 +205,7 @@ def test_warehouse_compliance(nav2_maps):
   assert float(np.asarray(states.metrics.zone_time)[..., 1].sum()) > 1.0
 
 
-@pytest.fixture
-def keep_xla_flags(monkeypatch):
-  """cli.main may add to XLA_FLAGS; restore it so later subprocesses see the suite's own value."""
-  monkeypatch.setenv("XLA_FLAGS", os.environ.get("XLA_FLAGS", ""))
-
-
-def test_cli_fleet_writes_outputs(tmp_path, capsys, keep_xla_flags):
+def test_cli_fleet_writes_outputs(tmp_path, capsys):
   out = tmp_path / "demo"
   rc = cli.main(["fleet", "--robots", "3", "--steps", "10", "--chunk-seconds", "1", "--out", str(out),
                  "--animate", "--no-cache", "--seed", "1", "--bag", str(tmp_path / "bag"), "--bag-costmaps", "1"])
@@ -235,14 +229,14 @@ def test_cli_fleet_writes_outputs(tmp_path, capsys, keep_xla_flags):
   assert "speed compliance" in text and "keepout entries 0" in text
 
 
-def test_cli_rejects_bad_arguments(keep_xla_flags, capsys):
+def test_cli_rejects_bad_arguments(capsys):
   assert cli.main(["fleet", "--robots", "5", "--robots-per-world", "2"]) == 2
   assert cli.main(["fleet", "--map", "x.yaml"]) == 2
   err = capsys.readouterr().err
   assert "--robots-per-world" in err and "Traceback" not in err
 
 
-def test_cli_bench_without_harness(monkeypatch, capsys, keep_xla_flags):
+def test_cli_bench_without_harness(monkeypatch, capsys):
   monkeypatch.setitem(sys.modules, "benchmarks.run", None)        # import raises ImportError
   if "benchmarks" in sys.modules:       # an earlier test imported the harness: `from benchmarks import run`
     monkeypatch.delattr(sys.modules["benchmarks"], "run", raising=False)   # would find the attribute
@@ -280,7 +274,7 @@ def test_large_batch_does_not_deadlock():
   assert bare["robot_steps_per_s"] > 0
 
 
-def test_cli_bench_runs_the_harness(capsys, keep_xla_flags):
+def test_cli_bench_runs_the_harness(capsys):
   assert cli.main(["bench", "--quick", "--only", "speed,baseline_speed", "--json"]) == 0
   report = json.loads(capsys.readouterr().out.strip().splitlines()[-1])
   speed = report["results"]["speed"]

@@ -17,12 +17,6 @@ _KEYS = ["x", "y", "speed_limit", "speed_limit_type", "keepout_cost", "binary_st
 _ROOT = Path(__file__).resolve().parents[2]
 
 
-@pytest.fixture(autouse=True)
-def keep_xla_flags(monkeypatch):
-  """cli.main may add to XLA_FLAGS; restore it so later subprocesses see the suite's own value."""
-  monkeypatch.setenv("XLA_FLAGS", os.environ.get("XLA_FLAGS", ""))
-
-
 def _query(capsys, *argv):
   rc = cli.main(["query", *map(str, argv)])
   out, err = capsys.readouterr()

@@ -35,8 +35,7 @@ def _env() -> dict:
 
 
 SINGLE = f"""
-from jaxfilters import xla_flags
-xla_flags.use_fast_cpu_compile()
+import jaxfilters  # noqa: F401  (first: importing it sets the XLA:CPU flags, jaxfilters/xla_flags.py)
 import contextlib, io, json, sys
 import jax, jax.numpy as jnp, numpy as np
 from sims.scale import sharding
