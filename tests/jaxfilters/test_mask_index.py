@@ -64,7 +64,6 @@ def test_jitted_out_of_range_mask_index_is_masked_and_flagged(name):
     np.testing.assert_array_equal(np.asarray(res.zone), [100, 0, 40, 0])
 
 
-
 def _lowered_text(name):
   """StableHLO of a jitted reader of a 2-mask stack of 6 x 7 cells at 3 points, each with its own mask."""
   grids = [_grid(np.full((6, 7), v, np.int8)) for v in (100, 40)]

@@ -3,6 +3,7 @@ setting the suite and the commands run with), leaves a user's own choice alone, 
 on a jaxlib that would abort on it."""
 
 import importlib.metadata
+import json
 import os
 import subprocess
 import sys
@@ -23,10 +24,10 @@ def _flags_after_import(flags):
     env["XLA_FLAGS"] = flags
   env["JAX_PLATFORMS"] = "cpu"
   code = ("import os, jaxfilters, jax, jax.numpy as jnp; jax.jit(lambda x: x + 1)(jnp.zeros(3)).block_until_ready(); "
-          "print(repr(os.environ.get('XLA_FLAGS')))")
+          "import json; print(json.dumps(os.environ.get('XLA_FLAGS')))")
   out = subprocess.run([sys.executable, "-c", code], cwd=ROOT, env=env, capture_output=True, text=True, timeout=120)
   assert out.returncode == 0, out.stderr
-  return eval(out.stdout.strip().splitlines()[-1])
+  return json.loads(out.stdout.strip().splitlines()[-1])
 
 
 def test_import_sets_the_classic_emitters_on_jaxlib_010_only():
