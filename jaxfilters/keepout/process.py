@@ -218,22 +218,29 @@ def _exact_sub_fleet(costmap, idx, idx_ok, state, window, enabled, transform, *,
   return _filter_batch(costmap, mask, idx, idx_ok, state, window, enabled, transform, config=config, exact=exact)
 
 
-# The redo runs on a handful of robots, rarely: XLA:CPU's LLVM passes take ~4x longer on its exact
-# arithmetic at the default optimisation level than at 0 (26 s vs 6.4 s under load here), for a
-# program whose run time then hardly matters (a few ms for 16 robots of 60 x 60). The level changes
-# no float semantics (no fast-math either way): the same integers, which
-# tests/jaxfilters/test_keepout_dispatch.py checks against the exact path.
+# The redo's programs on a CPU. XLA:CPU's LLVM passes take far longer on the fast path with its
+# exact reruns at the default optimisation level than at 0 (26 s vs 6.4 s under load here), so the
+# large redos (more than EXACT_PATH_REDO_MAX robots, rare) compile at level 0. The exact per-cell
+# path, which the usual redo of a few robots runs, compiles at level 1: at level 0 its program ran
+# 6x slower (13 ms against 2.1 ms for an 8-robot redo of 60 x 60 windows, so an eager call with open
+# robots took 24 ms instead of 2 ms at B = 64), and level 1 adds ~1 s to the README's first call at
+# B = 4,096 (1.8 -> 2.9 s cold). The level changes no float semantics (no fast-math either way): the
+# same integers, which tests/jaxfilters/test_keepout_dispatch.py checks against the exact path.
 _EXACT_JITS = {
-    "cpu": jax.jit(_exact_sub_fleet, static_argnames=("config", "exact"),
-                   compiler_options={"xla_backend_optimization_level": 0}),
+    ("cpu", True): jax.jit(_exact_sub_fleet, static_argnames=("config", "exact"),
+                           compiler_options={"xla_backend_optimization_level": 1}),
+    ("cpu", False): jax.jit(_exact_sub_fleet, static_argnames=("config", "exact"),
+                            compiler_options={"xla_backend_optimization_level": 0}),
     "other": jax.jit(_exact_sub_fleet, static_argnames=("config", "exact")),
 }
 
 
-def exact_redo(*args, **kw):
+def exact_redo(*args, exact: bool, **kw):
   """The host redo of an eager call's open robots (a sub-fleet of NumPy inputs): `_exact_sub_fleet`
-  jitted for this backend (at XLA optimisation level 0 on a CPU)."""
-  return _EXACT_JITS["cpu" if jax.default_backend() == "cpu" else "other"](*args, **kw)
+  jitted for this backend (on a CPU at XLA optimisation level 1 for the exact path, 0 for the fast
+  path with its exact reruns)."""
+  key = ("cpu", bool(exact)) if jax.default_backend() == "cpu" else "other"
+  return _EXACT_JITS[key](*args, exact=exact, **kw)
 
 
 def _filter_batch(costmap, mask, idx, idx_ok, state, window, enabled, transform, *, config,
