@@ -28,6 +28,23 @@ TRAIN_ARGS = ["--num-envs", str(NUM_ENVS), "--num-steps", str(NUM_STEPS), "--min
               "--num-eval", str(NUM_EVAL), "--randomize", "--layouts", str(LAYOUTS), "--seed", str(SEED)]
 
 
+def fresh_trace_caches():
+  """Empties JAX's in-process caches (`jax.clear_caches()`) before tracing this run's programs.
+
+  The compilation cache's key is the lowered program's text, and that text depends on the
+  process's tracing history: JAX lowers a repeated inner jitted call (`jnp.where`, `clip`,
+  `dynamic_update_index_in_dim`) once per program only while its traced jaxpr is still in the
+  tracing caches (LRU, 2,048 entries). In a worker that has traced hundreds of programs
+  before, entries are evicted in the middle of this run's trace, the program gets copies of
+  those functions, and its key misses the entry another process wrote for the same run (the
+  `rl train` of tests/rl/test_training_counts.py compiled the 44 s again after
+  tests/commands/test_rl.py in the same session). From empty caches every process traces the
+  same text. Call it first in a test that trains this run in the test process.
+  """
+  import jax
+  jax.clear_caches()
+
+
 def training_run():
   """(env, adapter, algo) as `rl train TRAIN_ARGS` builds them (sims/commands/rl.py `run_train`)."""
   from sims.rl.env import NavEnvConfig

@@ -92,6 +92,7 @@ def four_devices(rl_entry_point, tmp_path_factory):
 def trained(four_devices, tmp_path_factory):
   """The randomised smoke run through the command line: (out dir, stdout, stderr)."""
   out = tmp_path_factory.mktemp("train") / "pol"
+  rl_small.fresh_trace_caches()
   rc, stdout, stderr = run_cli(["rl", "train", *TRAIN_ARGS, "--out", str(out)])
   assert rc == 0, stderr
   return out, stdout, stderr

@@ -20,7 +20,7 @@ pytestmark = pytest.mark.skipif(brax_compat.jax_has_device_put_replicated(),
                                 reason="this jax still has device_put_replicated: Brax needs no shim")
 
 TINY = dict(num_timesteps=256, episode_length=8, num_envs=4, batch_size=4, num_minibatches=2, unroll_length=4,
-            num_updates_per_batch=1, num_evals=2, num_eval_envs=4, seed=0, wrap_env_fn=wrapper.wrap_for_brax_training,
+            num_updates_per_batch=1, num_evals=1, num_eval_envs=4, seed=0, wrap_env_fn=wrapper.wrap_for_brax_training,
             network_factory=functools.partial(ppo_networks.make_ppo_networks, policy_hidden_layer_sizes=(16,),
                                               value_hidden_layer_sizes=(16,)))
 

@@ -337,6 +337,7 @@ def test_ppo_iterations_train_the_policy():
   # so the session's compilation cache compiles them once for the run.
   from sims.rl.ppo import train_with_curve
   from tests import rl_small
+  rl_small.fresh_trace_caches()
   _, adapter, algo = rl_small.training_run()
   key = jax.random.PRNGKey(0)
   with jax.numpy_rank_promotion("allow"):              # rejax broadcasts [N, D] - [D] internally

@@ -56,6 +56,7 @@ def test_huge_timesteps_exit_2_before_anything_is_built(tmp_path):
 
 def test_timesteps_and_evals_do_what_the_help_says(tmp_path):
   out = tmp_path / "pol"
+  rl_small.fresh_trace_caches()
   # The suite's small run (4 envs x 8 steps: 32 env steps per PPO iteration), whose programs are compiled once.
   rc, stdout, stderr = run_cli(["rl", "train", "--timesteps", "80", "--evals", "2", *rl_small.TRAIN_ARGS,
                                 "--out", str(out)])
