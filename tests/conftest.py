@@ -68,8 +68,8 @@ def nav2_maps() -> Path:
 # these last: most have few tests.
 # commands/test_rl.py first: it compiles the suite's small training run (tests/rl_small.py) at once,
 # and notebook 04, rl/test_env.py and rl/test_training_counts.py, later, load it from the cache. The
-# sharding file runs on the other worker meanwhile, so that the notebooks start after those programs
-# are written (04 starting first compiled them a second time beside test_rl.py, ~20 s).
+# sharding file runs on the other worker meanwhile, so that notebook 04 starts after test_rl.py has
+# written those programs (~2 minutes in) rather than compiling them beside it.
 SLOW_FILES = ("commands/test_rl.py", "scale/test_sharding.py", "project/test_notebooks.py", "rl/test_env.py",
               "project/test_readme.py", "fleet/test_env.py", "jaxfilters/test_layers.py",
               "jaxfilters/test_keepout_paths.py", "record/test_bag.py", "fleet/test_keepout_escape.py",
