@@ -120,10 +120,11 @@ def keepout_filter(costmap: Costmap, mask: FilterMask, poses, state: KeepoutStat
 # An eager call redoes on the host at most this fraction of its robots (see keepout_filter).
 HOST_REDO_MAX_FRACTION = 0.25
 # A host redo of at most this many robots (the power-of-two sub-fleet) runs the exact per-cell path
-# itself: it compiles in ~2.6 s on this project's 2-core CPU against ~8 s for the fast path with its
-# exact reruns (the README's first call at B = 4,096 redoes 6 robots: 10.3 s -> 4.6 s cold), and runs
-# 16 robots of 60 x 60 in ~30 ms. Larger sub-fleets run the fast path with the exact reruns in it,
-# whose run time grows far slower with the robots (20 ms against 380 ms at 256).
+# itself: on this project's 2-core CPU it compiles in ~1.5-1.7 s (at level 1, see _EXACT_JITS)
+# against ~8 s for the fast path with its exact reruns (the README's first call at B = 4,096 redoes 6
+# robots), and runs 8 / 16 robots of 60 x 60 in 2.3 / 4.7 ms. Larger sub-fleets run the fast path
+# with the exact reruns in it, whose run time grows far slower with the robots (20 ms at 256, where
+# the exact path compiled at level 0 took 380 ms).
 EXACT_PATH_REDO_MAX = 16
 
 
