@@ -15,18 +15,25 @@ def _grid(data, res=1.0, origin=(0.0, 0.0)):
   return OccupancyGrid.create(np.asarray(data, np.int8), res, origin)
 
 
-def _stack(type_code):
-  grids = [_grid(np.full((4, 4), v, np.int8)) for v in (100, 40)]
+TYPE_CODES = {"keepout": 0, "speed": 1, "binary": 3, "zone": 4}
+
+
+def _stack(type_code, shape=(4, 4)):
+  grids = [_grid(np.full(shape, v, np.int8)) for v in (100, 40)]
   return jf.FilterMask.create(grids, jf.FilterInfo.create(type_code, 100.0, -1.0) if type_code in (1, 2)
                               else jf.FilterInfo.create(type_code))
+
+
+def _table():
+  return jf.ZoneTable.create(["v"], {"v": 1.0}, {100: {"v": 2.0}, 40: {"v": 3.0}})
 
 
 def _call(name, idx, jit=False):
   b = len(idx)
   poses = np.full((b, 3), 1.5, np.float32)
-  table = jf.ZoneTable.create(["v"], {"v": 1.0}, {100: {"v": 2.0}, 40: {"v": 3.0}})
+  table = _table()
   cm = jf.Costmap.create(np.zeros((b, 4, 4), np.uint8), (0.0, 0.0), 1.0)
-  masks = {k: _stack(t) for k, t in (("keepout", 0), ("speed", 1), ("binary", 3), ("zone", 4))}
+  masks = {k: _stack(t) for k, t in TYPE_CODES.items()}
   fns = {
       "keepout": lambda m, i: jf.keepout_filter(cm, m, poses, jf.KeepoutState.create(b), mask_index=i),
       "speed": lambda m, i: jf.speed_filter(m, poses, jf.SpeedState.create(b), mask_index=i),
@@ -66,12 +73,8 @@ def test_jitted_out_of_range_mask_index_is_masked_and_flagged(name):
 
 def _lowered_text(name):
   """StableHLO of a jitted reader of a 2-mask stack of 6 x 7 cells at 3 points, each with its own mask."""
-  grids = [_grid(np.full((6, 7), v, np.int8)) for v in (100, 40)]
-  info = {"keepout": jf.FilterInfo.create(0), "speed": jf.FilterInfo.create(1, 100.0, -1.0),
-          "binary": jf.FilterInfo.create(3), "zone": jf.FilterInfo.create(4)}
-  kind = name.split("_")[0]
-  mask = jf.FilterMask.create(grids, info[kind])
-  table = jf.ZoneTable.create(["v"], {"v": 1.0}, {100: {"v": 2.0}, 40: {"v": 3.0}})
+  mask = _stack(TYPE_CODES[name.split("_")[0]], (6, 7))
+  table = _table()
   poses = jnp.full((3, 3), 1.5, jnp.float32)
   fns = {
       "keepout_at": lambda m, i: jf.keepout_cost_at(m, poses[:, :2], mask_index=i),
