@@ -522,7 +522,7 @@ def run_eval(args) -> int:
   # One program: whether the policy's (unclipped) mean action is finite on the first observations of
   # the episodes, and the episodes. A policy whose action is NaN or inf there has weights that
   # overflow float32; the env zeroes its NaN actions and the figures would describe a robot at rest,
-  # so none are reported. (As two programs the check alone compiled for ~3.6 s on a 2-core CPU.)
+  # so none are reported.
   # The weights go in as arguments, not as constants: the compilation cache then serves every policy
   # of the same architecture on the same env (a new checkpoint compiles nothing).
   weights = lambda p: dataclasses.replace(policy, params=p)
