@@ -22,6 +22,15 @@ NUM_EVAL = 2
 LAYOUTS = 4
 SEED = 0
 
+# `rl eval` options for a policy of this run's network (add --policy). A policy of these hidden
+# sizes and EPISODE_LENGTH, evaluated with these options, runs the same evaluation program as the
+# trained one (the weights are arguments), so the suite compiles it once. The seed is part of the
+# program: it draws the layouts.
+EVAL_EPISODES = 3
+EVAL_SEED = 5
+EVAL_ARGS = ["--episodes", str(EVAL_EPISODES), "--seed", str(EVAL_SEED), "--randomize", "--layouts", str(LAYOUTS),
+             "--json"]
+
 # `rl train` options for that run (add --timesteps, --evals and --out).
 TRAIN_ARGS = ["--num-envs", str(NUM_ENVS), "--num-steps", str(NUM_STEPS), "--minibatches", str(MINIBATCHES),
               "--episode-length", str(EPISODE_LENGTH), "--hidden", ",".join(map(str, HIDDEN)),

@@ -122,14 +122,13 @@ def test_train_writes_policy_results_and_curve(trained):
 
 def test_eval_json_has_the_figures(trained, capsys):
   out, _, _ = trained
-  rc, stdout, stderr = run_cli(["rl", "eval", "--policy", str(out), "--episodes", "3", "--seed", "5",
-                                "--randomize", "--layouts", str(rl_small.LAYOUTS), "--json"])
+  rc, stdout, stderr = run_cli(["rl", "eval", "--policy", str(out), *rl_small.EVAL_ARGS])
   assert rc == 0, stderr
   lines = stdout.strip().splitlines()
   assert len(lines) == 1
   res = json.loads(lines[0])
   assert set(EVAL_KEYS) <= set(res), sorted(set(EVAL_KEYS) - set(res))
-  assert res["episodes"] == 3 and res["seed"] == 5 and res["randomize"] is True
+  assert res["episodes"] == rl_small.EVAL_EPISODES and res["seed"] == rl_small.EVAL_SEED and res["randomize"] is True
   assert 0.0 <= res["success"] <= 1.0
   assert res["keepout_entries"] >= 0 and res["collisions"] >= 0 and res["speed_excess_s"] >= 0 and res["speed_excess_after_clip_s"] >= 0
   assert 0 <= res["speed_excess_outside_entry_s"] <= res["speed_excess_s"] * res["episodes"] + 1e-9
@@ -140,10 +139,10 @@ def test_eval_json_has_the_figures(trained, capsys):
 
 def test_eval_of_another_checkpoint_of_the_same_network_compiles_nothing(tmp_path, rl_entry_point):
   # `rl eval` passes the weights to its programs as arguments, not as constants: a second policy of
-  # the same architecture on the same env finds every program in the compilation cache.
-  argv = lambda p: ["rl", "eval", "--policy", str(p), "--episodes", "2", "--episode-length", "3", "--seed", "3",
-                    "--json"]
-  first, second = write_policy(tmp_path / "a", seed=1), write_policy(tmp_path / "b", seed=2)
+  # the same architecture on the same env finds every program in the compilation cache. (The small
+  # run's network and evaluation: test_eval_json_has_the_figures may have compiled it already.)
+  argv = lambda p: ["rl", "eval", "--policy", str(p), *rl_small.EVAL_ARGS]
+  first, second = (write_policy(tmp_path / n, seed=s, hidden=rl_small.HIDDEN) for n, s in (("a", 1), ("b", 2)))
   old = jax.config.jax_persistent_cache_min_compile_time_secs
   jax.config.update("jax_persistent_cache_min_compile_time_secs", 0.0)     # keep every program, however quick
   try:

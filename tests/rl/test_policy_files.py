@@ -21,6 +21,7 @@ from jaxfilters import cli
 from sims.rl import policy as P
 from sims.rl.env import NavEnvConfig
 from tests.fuzz.fuzz_policy import random_tree
+from tests import rl_small
 from tests.cli_run import run_cli
 
 REPO = Path(__file__).resolve().parents[2]
@@ -214,13 +215,28 @@ def test_evaluation_counts_nan_action_steps():
   assert np.all(np.asarray(out["length"]) >= 1)
 
 
+def inf_weights(tree):
+  """tanh(bias 3e38) = 1 in every hidden unit, two of them weighted +-3e38 into each action: +inf and
+  -inf for every observation (float32 overflow), from finite weights."""
+  layer = tree["actor"]["params"]["features"]["Dense_0"]
+  layer["kernel"][:] = 0.0
+  layer["bias"][:] = 3e38
+  head = tree["actor"]["params"]["action_mean"]
+  head["kernel"][:] = 0.0
+  head["kernel"][:2] = np.array([3e38, -3e38], np.float32)
+  head["bias"][:] = 0.0
+
+
 def test_rl_eval_refuses_non_finite_actions_and_reports_bad_action_steps(tmp_path):
-  bad = save(tmp_path / "bad", (2,), activation=jax.nn.relu, tree_edit=nan_weights, episode_length=3)
-  rc, stdout, stderr = run_cli(["rl", "eval", "--policy", str(bad), "--episodes", "2", "--json"])
+  # The suite's small run's network and evaluation (tests/rl_small.py): both policies run the program
+  # `rl eval` of the trained policy compiles (tests/commands/test_rl.py), from the session's cache.
+  bad = save(tmp_path / "bad", rl_small.HIDDEN, tree_edit=inf_weights, episode_length=rl_small.EPISODE_LENGTH)
+  rc, stdout, stderr = run_cli(["rl", "eval", "--policy", str(bad), *rl_small.EVAL_ARGS])
   lines = stderr.strip().splitlines()
-  assert rc == 2 and len(lines) == 1 and "actions are not finite (NaN or inf) on 2 of the 2" in lines[0], stderr
+  n = rl_small.EVAL_EPISODES
+  assert rc == 2 and len(lines) == 1 and f"actions are not finite (NaN or inf) on {n} of the {n}" in lines[0], stderr
   assert stdout == ""
-  good = save(tmp_path / "good", (2,), episode_length=3)
-  rc, stdout, stderr = run_cli(["rl", "eval", "--policy", str(good), "--episodes", "2", "--json"])
+  good = save(tmp_path / "good", rl_small.HIDDEN, episode_length=rl_small.EPISODE_LENGTH)
+  rc, stdout, stderr = run_cli(["rl", "eval", "--policy", str(good), *rl_small.EVAL_ARGS])
   assert rc == 0, stderr
   assert json.loads(stdout)["bad_action_steps"] == 0
