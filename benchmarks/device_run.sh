@@ -4,7 +4,8 @@
 # measures every figure (filters, pipeline, fleet with filters and bare MJX, baselines,
 # the C++ peer, copy bandwidth) into $OUT/bench.json, soaks the fleet (SOAK=0 skips it),
 # and with RL=1 also runs benchmarks/rl_bench.py (needs the `rl` extra's wheels in .whl);
-# PPO_SCALING=1 adds PPO over all the host's GPUs vs one (benchmarks/ppo_scaling.py, needs the rl wheels);
+# PPO_SCALING=1 adds PPO over all the host's GPUs vs one (benchmarks/ppo_scaling.py, needs the rl wheels;
+# PPO_SCALING_ENVS sets --num-envs, PPO_SCALING_EXTRA adds options, e.g. "--devices 1 --reset-capacity auto none");
 # PROBES=1 adds the fleet breakdown (benchmarks/fleet_breakdown.py) to $OUT/fleet_breakdown.json;
 # TESTS=0 / BENCH=0 skip those parts. A summary table is printed last.
 # Fits the device tool's 10-minute call with RL=0 and PROBES=0.
@@ -79,7 +80,7 @@ if [ "${PPO_SCALING:-0}" = 1 ]; then
   # PPO training calls over all the host's GPUs against one at the same batch (benchmarks/ppo_scaling.py).
   echo "== PPO over the devices vs one -> $OUT/ppo_scaling.json"
   timeout "${PPO_SCALING_TIMEOUT:-300}" python3 -m benchmarks.ppo_scaling --num-envs ${PPO_SCALING_ENVS:-1048576} \
-    --calls 2 --out "$OUT/ppo_scaling.json" > "$OUT/ppo_scaling.log" 2>&1
+    --calls 2 ${PPO_SCALING_EXTRA:-} --out "$OUT/ppo_scaling.json" > "$OUT/ppo_scaling.log" 2>&1
   echo "ppo_scaling rc=$?"; grep "^N=" "$OUT/ppo_scaling.log"
 fi
 

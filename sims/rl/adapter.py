@@ -8,6 +8,7 @@ first state, or a fresh `reset`), and optionally a Playground
 `randomization_fn` drawn per episode.
 """
 
+import math
 from typing import Any, Callable
 
 import jax
@@ -19,6 +20,14 @@ from gymnax.environments import spaces
 from sims.rl.env import NavEnv
 
 MAX_EPISODE_LENGTH = 2 ** 24   # EpisodeWrapper's step count is float32: exact up to 2**24
+RESET_CAPACITY_AUTO = "auto"
+
+
+def auto_reset_capacity(num_envs: int, episode_length: int) -> int:
+  """Fresh resets drawn per pass when `num_envs` envs of `episode_length` steps are stepped together:
+  four times the time limit's average (num_envs / episode_length ends per step), at least 8 and at
+  most num_envs. More ends in one step than that take more passes (see GymnaxAdapter)."""
+  return int(min(num_envs, max(8, math.ceil(4 * num_envs / episode_length))))
 
 
 @struct.dataclass
@@ -49,18 +58,30 @@ class GymnaxAdapter:
   limit), `action_space`, `observation_space`. Auto-reset restores the
   episode's first state (Playground's default, `full_reset=False`; cheap) or
   calls `reset` with a fresh key (`full_reset=True`: new spawn, goal and
-  randomised model every episode). With `randomization_fn` (Playground's
+  randomised model every episode). With `full_reset`, a batch of envs stepped under `jax.vmap`
+  (what rejax does) draws the fresh resets only for the envs whose episode ended
+  (`reset_capacity`, default "auto": `auto_reset_capacity`): up to that many at a time in a loop
+  that runs while ended envs are left (none: no reset is computed), gathered by index and written
+  back; each env's reset is the one it would get alone (its own key), so the batch's states equal
+  those of resetting every env and keeping the ended ones (`reset_capacity=None`, the cost of a
+  full reset at every step). With `randomization_fn` (Playground's
   `fn(model, rng=[N, 2]) -> (model_v, in_axes)`) each env draws its own model
   at reset and only the randomised leaves are carried in its state; the model
   is swapped in the way Playground's `BraxDomainRandomizationVmapWrapper` does.
   """
 
   def __init__(self, env: NavEnv, episode_length: int,
-               randomization_fn: Callable | None = None, *, full_reset: bool = False):
+               randomization_fn: Callable | None = None, *, full_reset: bool = False,
+               reset_capacity: int | str | None = RESET_CAPACITY_AUTO):
     if isinstance(episode_length, bool) or int(episode_length) != episode_length or \
         not 1 <= episode_length <= MAX_EPISODE_LENGTH:
       raise ValueError(f"episode_length must be an integer in [1, 2**24] (EpisodeWrapper counts the steps in "
                        f"float32, exact to 2**24); got {episode_length!r}")
+    if not (reset_capacity is None or reset_capacity == RESET_CAPACITY_AUTO or
+            (isinstance(reset_capacity, int) and not isinstance(reset_capacity, bool) and reset_capacity >= 1)):
+      raise ValueError(f"reset_capacity must be an integer >= 1, 'auto' or None (reset every env at every step); "
+                       f"got {reset_capacity!r}")
+    self.reset_capacity = reset_capacity
     self.env = env
     self.wrapped = EpisodeWrapper(env, int(episode_length), 1)
     self.episode_length = int(episode_length)
@@ -127,13 +148,48 @@ class GymnaxAdapter:
     st = self.run_with_model(state.model_leaves, lambda: self.wrapped.step(state.env_state, action))
     done = st.done > 0
     info = {"metrics": st.metrics, "truncation": st.info["truncation"], "final_obs": st.obs}
+    current = AdapterState(st, state.first, state.model_leaves)
     if self.full_reset:
-      _, restart = self.reset(key)
+      new = self.reset_where(key, done, current)
     else:
-      restart = AdapterState(state.first, state.first, state.model_leaves)
-    new = jax.tree.map(lambda a, b: jnp.where(done, a, b), restart,
-                       AdapterState(st, state.first, state.model_leaves))
+      new = _where(done, AdapterState(state.first, state.first, state.model_leaves), current)
     return new.env_state.obs, new, st.reward, done, info
+
+  def reset_where(self, key, done, current: AdapterState) -> AdapterState:
+    """`current` with a fresh `reset(key)`'s state where `done` (bool), else `current`.
+
+    Under `jax.vmap` (keys [N], done [N], states [N]) only the envs where `done` are reset, up to
+    `reset_capacity` at a time (see the class docstring); unbatched, or with reset_capacity None,
+    the reset is computed and selected.
+    """
+    fresh = lambda k: self.reset(k)[1]
+    if self.reset_capacity is None:
+      return _where(done, fresh(key), current)
+
+    @jax.custom_batching.custom_vmap
+    def fresh_where_done(key, done, current):
+      return _where(done, fresh(key), current)
+
+    @fresh_where_done.def_vmap
+    def batched(axis_size, in_batched, key, done, current):
+      along = lambda x, b: x if b else jnp.broadcast_to(x, (axis_size,) + jnp.shape(x))
+      key_b, done_b, current_b = in_batched
+      key, done = along(key, key_b), along(done, done_b)
+      current = jax.tree.map(along, current, current_b)
+      cap = auto_reset_capacity(axis_size, self.episode_length) if self.reset_capacity == RESET_CAPACITY_AUTO \
+          else min(int(self.reset_capacity), axis_size)
+
+      def one_pass(carry):
+        states, left = carry
+        idx = jnp.nonzero(left, size=cap, fill_value=axis_size)[0]      # axis_size: no env (dropped)
+        new = jax.vmap(fresh)(key[jnp.minimum(idx, axis_size - 1)])
+        states = jax.tree.map(lambda s, n: s.at[idx].set(n.astype(s.dtype), mode="drop"), states, new)
+        return states, left.at[idx].set(False, mode="drop")
+
+      states, _ = jax.lax.while_loop(lambda c: jnp.any(c[1]), one_pass, (current, done))
+      return states, jax.tree.map(lambda _: True, states)
+
+    return fresh_where_done(key, done, current)
 
   def action_space(self, params=None):
     return spaces.Box(low=-1.0, high=1.0, shape=(self.env.action_size,))
@@ -150,4 +206,8 @@ class GymnaxAdapter:
     return type(self.env.unwrapped).__name__
 
 
-__all__ = ["AdapterParams", "AdapterState", "GymnaxAdapter"]
+def _where(done, a, b):
+  return jax.tree.map(lambda x, y: jnp.where(done, x, y), a, b)
+
+
+__all__ = ["AdapterParams", "AdapterState", "GymnaxAdapter", "RESET_CAPACITY_AUTO", "auto_reset_capacity"]

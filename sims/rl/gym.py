@@ -263,11 +263,11 @@ def _programs(env: NavEnv, episode_length: int, randomization_fn, num_envs: int 
     the previous call) are reset and their actions ignored (reward 0, not done); the others step."""
     keys = jax.random.split(key, num_envs + 1)
     stepped, obs, reward, done, trunc, metrics = jax.vmap(step_one)(state, actions)
-    obs0, state0 = jax.vmap(adapter.reset)(keys[1:])
-    pick = lambda a, b: jnp.where(jnp.reshape(autoreset, autoreset.shape + (1,) * (a.ndim - 1)), a, b)
-    state = jax.tree.map(pick, state0, stepped)
+    # Only the envs in `autoreset` are reset (GymnaxAdapter.reset_where); the state's obs is the
+    # stepped one elsewhere.
+    state = jax.vmap(adapter.reset_where)(keys[1:], autoreset, stepped)
     metrics = {k: jnp.where(autoreset, jnp.zeros_like(v), v) for k, v in metrics.items()}
-    return (keys[0], state, pick(obs0, obs), jnp.where(autoreset, 0.0, reward).astype(reward.dtype),
+    return (keys[0], state, state.env_state.obs, jnp.where(autoreset, 0.0, reward).astype(reward.dtype),
             done & ~autoreset, trunc & ~autoreset, metrics)
 
   step = step_next if autoreset_mode == AutoresetMode.NEXT_STEP else step_v

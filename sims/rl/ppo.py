@@ -41,6 +41,7 @@ through which samples share a minibatch and the order of float sums.
 """
 
 import concurrent.futures
+import copy
 import dataclasses
 import time
 from pathlib import Path
@@ -227,6 +228,9 @@ class BlockShufflePPO(rejax.PPO):
 def block_shuffle(algo, mesh):
   """`algo` (rejax.PPO from `make_ppo`) as a BlockShufflePPO with one block per device of `mesh`.
 
+  Its env (a GymnaxAdapter) resets every env at every step (`reset_capacity=None`): gathering the
+  ended envs by index across the sharded env axis would move env states between devices.
+
   Raises:
     ValueError: num_envs not a multiple of the devices, or a device's samples per iteration
       (num_envs / D x num_steps) not a multiple of num_minibatches.
@@ -239,7 +243,19 @@ def block_shuffle(algo, mesh):
                      f"num_minibatches = {algo.num_minibatches} equal parts")
   from sims.scale import sharding
   fields = {f.name: getattr(algo, f.name) for f in dataclasses.fields(algo)}
+  fields["env"] = _reset_every_env(fields["env"])
   return BlockShufflePPO(**fields, shuffle_blocks=d, block_sharding=sharding.worlds_sharding(mesh))
+
+
+def _reset_every_env(env):
+  """`env` (a GymnaxAdapter, or rejax's FloatObsWrapper around one) with reset_capacity None."""
+  inner = env.__dict__.get("env") if not isinstance(env, GymnaxAdapter) else None
+  if isinstance(inner, GymnaxAdapter):
+    return type(env)(_reset_every_env(inner))
+  if isinstance(env, GymnaxAdapter) and env.reset_capacity is not None:
+    env = copy.copy(env)
+    env.reset_capacity = None
+  return env
 
 
 def replicas_identical(ts) -> bool:
