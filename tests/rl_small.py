@@ -48,7 +48,8 @@ def fresh_trace_caches():
   those functions, and its key misses the entry another process wrote for the same run (the
   `rl train` of tests/rl/test_training_counts.py compiled the 44 s again after
   tests/commands/test_rl.py in the same session). From empty caches every process traces the
-  same text. Call it first in a test that trains this run in the test process.
+  same text. Call it first in a test that trains this run in the test process, or evaluates a
+  policy with EVAL_ARGS.
   """
   import jax
   jax.clear_caches()

@@ -30,7 +30,7 @@ import rejax
 from flax import struct
 from gymnax.environments import spaces
 
-from sims.rl.adapter import GymnaxAdapter
+from sims.rl.adapter import RESET_CAPACITY_AUTO, GymnaxAdapter
 from sims.rl.env import NavEnv
 from sims.rl.ppo import EVAL_KEYS, episode_sums, make_ppo
 
@@ -61,7 +61,8 @@ class FleetAdapter(GymnaxAdapter):
   state, reward [K], done bool [K], info)`. done marks the end of each robot's episode: its own
   end (the env has respawned it; its obs row is the new episode's first) or the world's time
   limit after `episode_length` steps, when the world restarts (its first state, or a fresh
-  `reset` with a new model when `full_reset`). `info["truncation"]` (bool [K]) marks the robots
+  `reset` with a new model when `full_reset`, computed under vmap only for the worlds whose time
+  is up: `reset_capacity`, as in GymnaxAdapter). `info["truncation"]` (bool [K]) marks the robots
   whose episode the time limit ended. The spaces are one robot's: action (2,), observation (98,).
 
   Raises:
@@ -69,11 +70,11 @@ class FleetAdapter(GymnaxAdapter):
   """
 
   def __init__(self, env: NavEnv, episode_length: int, randomization_fn: Callable | None = None, *,
-               full_reset: bool = False):
+               full_reset: bool = False, reset_capacity: int | str | None = RESET_CAPACITY_AUTO):
     if env.nav_config.agents != "per_robot":
       raise ValueError(f"FleetAdapter needs a NavEnv with NavEnvConfig(agents='per_robot'); got agents "
                        f"{env.nav_config.agents!r} (GymnaxAdapter takes a world env)")
-    super().__init__(env, episode_length, randomization_fn, full_reset=full_reset)
+    super().__init__(env, episode_length, randomization_fn, full_reset=full_reset, reset_capacity=reset_capacity)
 
   def reset(self, key, params=None):
     del params
@@ -89,12 +90,12 @@ class FleetAdapter(GymnaxAdapter):
     time_up = steps >= self.episode_length
     ended = st.done > 0
     info = {"metrics": st.metrics, "truncation": time_up & ~ended, "final_obs": st.obs}
-    if self.full_reset:
-      _, restart = self.reset(key)
+    current = FleetState(st, steps, state.first, state.model_leaves)
+    if self.full_reset:        # under vmap only the worlds whose time is up are reset (GymnaxAdapter.reset_where)
+      new = self.reset_where(key, time_up, current)
     else:
       restart = FleetState(state.first, jnp.zeros((), jnp.int32), state.first, state.model_leaves)
-    new = jax.tree.map(lambda a, b: jnp.where(time_up, a, b), restart,
-                       FleetState(st, steps, state.first, state.model_leaves))
+      new = jax.tree.map(lambda a, b: jnp.where(time_up, a, b), restart, current)
     return new.env_state.obs, new, st.reward, ended | time_up, info
 
   def action_space(self, params=None):

@@ -122,6 +122,7 @@ def test_train_writes_policy_results_and_curve(trained):
 
 def test_eval_json_has_the_figures(trained, capsys):
   out, _, _ = trained
+  rl_small.fresh_trace_caches()          # the text every process lowers for this evaluation
   rc, stdout, stderr = run_cli(["rl", "eval", "--policy", str(out), *rl_small.EVAL_ARGS])
   assert rc == 0, stderr
   lines = stdout.strip().splitlines()
@@ -146,6 +147,7 @@ def test_eval_of_another_checkpoint_of_the_same_network_compiles_nothing(tmp_pat
   old = jax.config.jax_persistent_cache_min_compile_time_secs
   jax.config.update("jax_persistent_cache_min_compile_time_secs", 0.0)     # keep every program, however quick
   try:
+    rl_small.fresh_trace_caches()
     rc, out_a, stderr = run_cli(argv(first))
     assert rc == 0, stderr
     with count_cache_misses() as misses:

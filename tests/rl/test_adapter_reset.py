@@ -1,10 +1,11 @@
-"""GymnaxAdapter with full_reset under vmap: only the ended envs' resets are drawn (`reset_capacity`).
+"""GymnaxAdapter / FleetAdapter with full_reset under vmap: only the ended envs' (worlds') resets
+are drawn (`reset_capacity`).
 
-Episodes staggered so that a few envs end at each step (the time limit and early ends): with a
-capacity of 1 (one pass per ended env) the batch's states equal those of resetting every env at
-every step and keeping the ended ones (reset_capacity=None): integers and flags exactly, floats to
-a few float32 ulps (XLA rounds a reset computed in a batch of 1 slightly differently from one in
-a batch of 6, e.g. a sine in the observation: 3e-6 apart).
+Episodes staggered so that a few envs end at each step (the time limit and early ends). From the
+same states, a capacity of 1 (one pass per ended env) gives the states of resetting every env at
+every step and keeping the ended ones (reset_capacity=None): integers and flags exactly, floats
+to a few float32 ulps (XLA rounds a reset computed in a batch of 1 slightly differently from one
+in a batch of 6, e.g. a sine in the observation: 3e-6 apart). Both adapters step in one program.
 """
 
 from __future__ import annotations
@@ -25,35 +26,40 @@ def env():
   return NavEnv.create()
 
 
-def _run(env, capacity):
-  ad = GymnaxAdapter(env, L, full_reset=True, reset_capacity=capacity)
-  _, st = jax.jit(jax.vmap(ad.reset, in_axes=(0, None)))(jax.random.split(jax.random.PRNGKey(0), N), None)
-  info = dict(st.env_state.info, steps=jnp.arange(N, dtype=jnp.float32) % L)   # staggered time limits
-  st = st.replace(env_state=st.env_state.replace(info=info))
-  step = jax.jit(jax.vmap(ad.step, in_axes=(0, 0, 0, None)))
-  actions = jnp.tile(jnp.asarray([[1.0, 0.5]]), (N, 1))
-  states, dones = [], []
-  for i in range(STEPS):
-    _, st, _, done, _ = step(jax.random.split(jax.random.PRNGKey(i + 1), N), st, actions, None)
-    states.append(st)
-    dones.append(np.asarray(done))
-  return states, np.stack(dones)
+def _assert_same(a, b, what):
+  for x, y in zip(jax.tree.leaves(a), jax.tree.leaves(b), strict=True):
+    x, y = np.asarray(x), np.asarray(y)
+    if np.issubdtype(x.dtype, np.floating):
+      np.testing.assert_allclose(y, x, rtol=1e-5, atol=1e-5, err_msg=what)
+    else:
+      np.testing.assert_array_equal(y, x, err_msg=what)
+
+
+def _both(every, some, n):
+  """One program stepping both adapters from the same states (XLA shares the env step): each
+  step's states are compared from equal inputs, so one compile serves both."""
+  def run(keys, st, actions):
+    return (jax.vmap(every.step, in_axes=(0, 0, 0, None))(keys, st, actions, None),
+            jax.vmap(some.step, in_axes=(0, 0, 0, None))(keys, st, actions, None))
+  reset = jax.jit(jax.vmap(every.reset, in_axes=(0, None)))
+  return reset(jax.random.split(jax.random.PRNGKey(0), n), None)[1], jax.jit(run)
 
 
 def test_resets_of_the_ended_envs_only_equal_resetting_every_env(env):
-  every, done_every = _run(env, None)
-  some, done_some = _run(env, 1)
-  np.testing.assert_array_equal(done_some, done_every)
-  ends = done_every.sum(axis=1)
-  assert (ends > 0).sum() >= 4 and ends.max() < N       # a few envs end at most steps, never all
-  assert ends.max() > 1                                   # some step needs more than one pass
-  for i, (a, b) in enumerate(zip(every, some)):
-    for x, y in zip(jax.tree.leaves(a), jax.tree.leaves(b)):
-      x, y = np.asarray(x), np.asarray(y)
-      if np.issubdtype(x.dtype, np.floating):
-        np.testing.assert_allclose(y, x, rtol=1e-5, atol=1e-5, err_msg=f"step {i}")
-      else:
-        np.testing.assert_array_equal(y, x, err_msg=f"step {i}")
+  st, run = _both(GymnaxAdapter(env, L, full_reset=True, reset_capacity=None),
+                  GymnaxAdapter(env, L, full_reset=True, reset_capacity=1), N)
+  info = dict(st.env_state.info, steps=jnp.arange(N, dtype=jnp.float32) % L)   # staggered time limits
+  st = st.replace(env_state=st.env_state.replace(info=info))
+  actions = jnp.tile(jnp.asarray([[1.0, 0.5]]), (N, 1))
+  ends = []
+  for i in range(STEPS):
+    (_, a, _, done_a, _), (_, b, _, done_b, _) = run(jax.random.split(jax.random.PRNGKey(i + 1), N), st, actions)
+    np.testing.assert_array_equal(np.asarray(done_b), np.asarray(done_a))
+    _assert_same(a, b, f"step {i}")
+    ends.append(int(np.asarray(done_a).sum()))
+    st = a
+  assert sum(e > 0 for e in ends) >= 4 and max(ends) < N      # a few envs end at most steps, never all
+  assert max(ends) > 1                                         # some step needs more than one pass
 
 
 def test_auto_capacity_and_bad_values():
@@ -76,3 +82,25 @@ def test_sharded_training_resets_every_env():
   inner = blocked.env.env                       # rejax's FloatObsWrapper around the adapter
   assert isinstance(inner, GymnaxAdapter) and inner.reset_capacity is None and inner.full_reset
   assert adapter.reset_capacity == "auto" and algo.env.env.reset_capacity == "auto"
+
+
+def test_fleet_worlds_whose_time_is_up_are_reset_alone():
+  """FleetAdapter (one agent per robot): the worlds whose time limit is up restart from a fresh
+  reset; computing only those (capacity 1) gives the states of resetting every world."""
+  from sims.fleet.config import FleetConfig
+  from sims.rl.env import NavEnvConfig
+  from sims.rl.fleet import FleetAdapter
+  worlds, length = 4, 3
+  env = NavEnv.create(fleet_config=FleetConfig(robots_per_world=2), config=NavEnvConfig(agents="per_robot"))
+  st, run = _both(FleetAdapter(env, length, full_reset=True, reset_capacity=None),
+                  FleetAdapter(env, length, full_reset=True, reset_capacity=1), worlds)
+  st = st.replace(steps=jnp.arange(worlds, dtype=jnp.int32) % length)      # staggered time limits
+  actions = jnp.tile(jnp.asarray([[[1.0, 0.5]]]), (worlds, env.num_robots, 1))
+  for i in range(5):
+    (_, a, _, done_a, _), (_, b, _, done_b, _) = run(jax.random.split(jax.random.PRNGKey(i + 1), worlds), st,
+                                                     actions)
+    np.testing.assert_array_equal(np.asarray(done_b), np.asarray(done_a))
+    _assert_same(a, b, f"step {i}")
+    restarts = int((np.asarray(a.steps) == 0).sum())
+    assert 1 <= restarts < worlds                           # some worlds restart at every step, never all
+    st = a

@@ -231,6 +231,7 @@ def test_rl_eval_refuses_non_finite_actions_and_reports_bad_action_steps(tmp_pat
   # The suite's small run's network and evaluation (tests/rl_small.py): both policies run the program
   # `rl eval` of the trained policy compiles (tests/commands/test_rl.py), from the session's cache.
   bad = save(tmp_path / "bad", rl_small.HIDDEN, tree_edit=inf_weights, episode_length=rl_small.EPISODE_LENGTH)
+  rl_small.fresh_trace_caches()          # this worker's tracing history would change the program's text
   rc, stdout, stderr = run_cli(["rl", "eval", "--policy", str(bad), *rl_small.EVAL_ARGS])
   lines = stderr.strip().splitlines()
   n = rl_small.EVAL_EPISODES
