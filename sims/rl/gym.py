@@ -262,7 +262,7 @@ def _programs(env: NavEnv, episode_length: int, randomization_fn, num_envs: int 
     """Gymnasium's next-step auto-reset: envs marked in `autoreset` (bool [N], those that ended at
     the previous call) are reset and their actions ignored (reward 0, not done); the others step."""
     keys = jax.random.split(key, num_envs + 1)
-    stepped, obs, reward, done, trunc, metrics = jax.vmap(step_one)(state, actions)
+    stepped, _, reward, done, trunc, metrics = jax.vmap(step_one)(state, actions)
     # Only the envs in `autoreset` are reset (GymnaxAdapter.reset_where); the state's obs is the
     # stepped one elsewhere.
     state = jax.vmap(adapter.reset_where)(keys[1:], autoreset, stepped)
