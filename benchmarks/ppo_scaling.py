@@ -81,7 +81,7 @@ def main(argv=None) -> int:
   for c in args.reset_capacity:
     if c in ("auto", "none"):
       capacities.append(None if c == "none" else c)
-    elif c.isdigit() and int(c) >= 1:
+    elif c.isascii() and c.isdigit() and int(c) >= 1:
       capacities.append(int(c))
     else:
       ap.error(f"--reset-capacity: each value must be auto, none or an integer >= 1; got {c!r}")
@@ -113,7 +113,8 @@ def main(argv=None) -> int:
       plan = [(n, 1, None)] if d == 1 else (
           [(n, d, mesh), (n, 1, None)] + ([] if args.skip_ceiling else [(n // d, 1, None)]))
       for envs, devs, m in plan:
-        for cap, adapter in adapters.items():
+        # A sharded run resets every env whatever the capacity (block_shuffle): timed once.
+        for cap, adapter in list(adapters.items())[:1 if m is not None else None]:
           algo = make_ppo(adapter, timesteps_per_call=args.iters * envs * args.num_steps, num_envs=envs,
                           num_steps=args.num_steps, num_minibatches=args.minibatches)
           r = _time_program(algo, m, args.calls)
