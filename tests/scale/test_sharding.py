@@ -53,7 +53,17 @@ np.savez(sys.argv[1], **ref)
 mesh = sharding.make_mesh({DEVICES})
 s0 = env.reset_fn(mesh=mesh)(sharding.put_global(env.params, sharding.replicated(mesh)),
                               sharding.put_global(keys, sharding.worlds_sharding(mesh)))
-states, frames = env.rollout_fn({STEPS}, mesh=mesh)(env.params, s0)
+roll = env.rollout_fn({STEPS}, mesh=mesh)
+states, frames = roll(env.params, s0)
+# Communication: worlds and envs are independent, so a sharded step moves no per-world data between
+# devices. Collective ops in the compiled programs: an all-gather or all-to-all would copy the batch.
+import re
+def collectives(compiled):
+  found = re.findall(r"= (.+?) (all-gather|all-to-all|collective-permute|reduce-scatter|all-reduce)(?:-start)?\\(",
+                     compiled.as_text())
+  return sorted({{f"{{kind}} {{shape[:40]}}" for shape, kind in found}})
+# Lowered right after the call, from the same traced rollout: the call's executable, not a second compile.
+out["fleet_collectives"] = collectives(roll.lower(env.params, s0).compile())
 got = sharding.integer_outputs(states, frames)
 out["equal"] = {{k: bool(np.array_equal(np.asarray(v), ref[k])) for k, v in got.items()}}
 out["pose_max_diff"] = float(np.max(np.abs(np.asarray(frames.pose) - np.asarray(plain[1].pose))))
@@ -82,14 +92,6 @@ out["rl_obs_max_diff"] = float(np.max(np.abs(np.asarray(res["plain"].obs) - np.a
 out["rl_moved"] = float(np.min(np.linalg.norm(np.asarray(s.data.qpos[:, 0, :2])
                                               - np.asarray(start.data.qpos[:, 0, :2]), axis=-1)))
 
-# Communication: worlds and envs are independent, so a sharded step moves no per-world data between
-# devices. Collective ops in the compiled programs: an all-gather or all-to-all would copy the batch.
-import re
-def collectives(compiled):
-  found = re.findall(r"= (.+?) (all-gather|all-to-all|collective-permute|reduce-scatter|all-reduce)(?:-start)?\\(",
-                     compiled.as_text())
-  return sorted({{f"{{kind}} {{shape[:40]}}" for shape, kind in found}})
-out["fleet_collectives"] = collectives(env.rollout_fn({STEPS}, mesh=mesh).lower(env.params, s0).compile())
 # The RL env's reset in its randomised training layouts (drawn spawn points), run at every auto-reset.
 from sims.rl.randomization import training_env
 from sims.rl.env import NavEnvConfig
