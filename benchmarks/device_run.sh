@@ -6,6 +6,9 @@
 # and with RL=1 also runs benchmarks/rl_bench.py (needs the `rl` extra's wheels in .whl);
 # PPO_SCALING=1 adds PPO over all the host's GPUs vs one (benchmarks/ppo_scaling.py, needs the rl wheels;
 # PPO_SCALING_ENVS sets --num-envs, PPO_SCALING_EXTRA adds options, e.g. "--devices 1 --reset-capacity auto none");
+# RECIPE=1 retrains the shipped policy's recipe (examples/ppo_nav/README.md) cold, --no-cache, timed from the
+# interpreter's start, into $OUT/recipe (its results.json beside examples/ppo_nav/results.json; the
+# policy weights are not kept); RECIPE_TIMEOUT (default 200 s) bounds it;
 # PROBES=1 adds the fleet breakdown (benchmarks/fleet_breakdown.py) to $OUT/fleet_breakdown.json;
 # TESTS=0 / BENCH=0 skip those parts. A summary table is printed last.
 # Fits the device tool's 10-minute call with RL=0 and PROBES=0.
@@ -82,6 +85,27 @@ if [ "${PPO_SCALING:-0}" = 1 ]; then
   timeout "${PPO_SCALING_TIMEOUT:-300}" python3 -m benchmarks.ppo_scaling --num-envs ${PPO_SCALING_ENVS:-1048576} \
     --calls 2 ${PPO_SCALING_EXTRA:-} --out "$OUT/ppo_scaling.json" > "$OUT/ppo_scaling.log" 2>&1
   echo "ppo_scaling rc=$?"; grep "^N=" "$OUT/ppo_scaling.log"
+fi
+
+if [ "${RECIPE:-0}" = 1 ]; then
+  # The shipped PPO recipe from a cold interpreter with no compilation cache: wall, compile, train, curve.
+  echo "== the examples/ppo_nav recipe, cold -> $OUT/recipe"
+  start=$(date +%s.%N)
+  timeout "${RECIPE_TIMEOUT:-200}" python3 -m jaxfilters rl train --randomize --costmap-stop --timesteps 20000000 \
+    --num-envs 8192 --num-steps 32 --evals 4 --num-eval 256 --seed 0 --no-cache --out "$OUT/recipe" \
+    > "$OUT/recipe.log" 2>&1
+  rc=$?
+  echo "recipe rc=$rc wall_s=$(python3 -c "import sys, time; print(round(time.time() - float(sys.argv[1]), 1))" "$start")"
+  rm -f "$OUT/recipe/policy.msgpack"
+  [ -s "$OUT/recipe/results.json" ] && python3 - "$OUT/recipe/results.json" examples/ppo_nav/results.json <<'PY'
+import json, sys
+new, old = (json.load(open(p)) for p in sys.argv[1:3])
+for name, r in (("this run", new), ("shipped", old)):
+  t, f = r["timing"], r["final"]
+  print(f"{name}: {r['device']['kind']} compile {t['compile_s']:.1f} s, train {t['train_s']:.1f} s, "
+        f"{t['env_steps_per_s'] / 1e6:.2f} M env-steps/s, success {f['success']:.3f}, goals {f['goals_reached']:.2f}, "
+        f"keepout {f['keepout_entries']:.0f}; success curve " + " ".join(f"{x:.2f}" for x in r["curve"]["success"]))
+PY
 fi
 
 echo "== summary"
