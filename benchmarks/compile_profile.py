@@ -25,15 +25,21 @@ LOG_TOOL = Path(__file__).resolve().parent / "compile_log"
 COMPILE, TRACE, LOWER = "backend_compile_duration", "jaxpr_trace_duration", "jaxpr_to_mlir_module_duration"
 
 
+FIELDS = {"test": str, "event": str, "fun": str, "s": (int, float)}
+
+
 def read_log(folder: Path) -> list[dict]:
-  """Every event line of the folder's *.jsonl files (a line cut short by a killed process is skipped)."""
+  """Every event line of the folder's *.jsonl files. Skipped: a line cut short by a killed process, and
+  a line that is not one of the logger's events (another tool's .jsonl left in the folder)."""
   rows = []
   for path in sorted(folder.glob("*.jsonl")):
-    for line in path.read_text().splitlines():
+    for line in path.read_text(errors="replace").splitlines():
       try:
-        rows.append(json.loads(line))
+        row = json.loads(line)
       except json.JSONDecodeError:
         continue
+      if isinstance(row, dict) and all(isinstance(row.get(k), t) for k, t in FIELDS.items()):
+        rows.append(row)
   return rows
 
 

@@ -34,6 +34,8 @@ def test_summary_by_test_file_and_a_cut_line_skipped(tmp_path):
            {"test": "tests/a.py::test_y[1] (setup)", "event": cp.TRACE, "s": 0.5, "fun": "f", "t": 0},
            {"test": "tests/b.py::test_z (call)", "event": cp.COMPILE, "s": 3.0, "fun": "jit(f)", "t": 0}]
   (log / "1.jsonl").write_text("\n".join(json.dumps(r) for r in lines) + '\n{"test": "cut')
+  # Another tool's lines in the folder (the summary once stopped on them with a KeyError).
+  (log / "2.jsonl").write_text('{"name": "x", "dur": 1}\n[1, 2]\n{"test": "t", "event": "e", "fun": "f", "s": "2"}\n')
   s = cp.summarise(cp.read_log(log))
   assert list(s["files"]) == ["tests/b.py", "tests/a.py"]           # most compile first
   assert s["files"]["tests/a.py"] == {"compile": 2.0, "trace": 0.5, "lower": 0.0}
