@@ -208,10 +208,14 @@ def test_disabled_robot_passes_through_and_toggle_needs_no_recompile():
   assert compiles() == 0
 
 
+# One robot's keepout inside a caller's jit (shared by the two tests below: one compile).
+_one_robot = jax.jit(lambda cm, m: ko.keepout_filter(cm, m, jnp.zeros((1, 3)), ko.KeepoutState.create(1))[0].cost)
+
+
 def test_new_mask_contents_compile_nothing():
   mask = _mask(np.full((3, 3), 100), 1.0, (3, 3))
   cm = Costmap.create(np.zeros((1, 10, 10), np.uint8), (0, 0), 1.0)
-  f = jax.jit(lambda cm, m: ko.keepout_filter(cm, m, jnp.zeros((1, 3)), ko.KeepoutState.create(1))[0].cost)
+  f = _one_robot
   a = f(cm, mask)
   mask2 = mask.with_data(np.full((3, 3), 50, np.int8))
   b = f(cm, mask2)
@@ -221,6 +225,22 @@ def test_new_mask_contents_compile_nothing():
     c = f(cm, mask3)
   assert int(c.max()) == 64
   assert compiles() == 0
+
+
+def test_one_robot_runs_no_exact_path_outside_the_rerun_loop():
+  """Inside a caller's jit the robots a fast path leaves open are redone exactly in a loop of as many
+  turns as there are such robots (common.rerun): none open, no turn. With one robot, XLA hoisted the
+  exact path out of that loop (its inputs, sliced to the whole batch of one, looked loop-invariant),
+  so every call ran the exact path's own loops (~90 turns): 400 against 185 us per call on the 2-core
+  CPU (BENCHMARKS.md, latency). No loop of the rerun loop's body may sit in the program's entry."""
+  mask = _mask(np.full((3, 3), 100), 1.0, (3, 3))
+  cm = Costmap.create(np.zeros((1, 10, 10), np.uint8), (0, 0), 1.0)
+  text = _one_robot.lower(cm, mask).compile().as_text()
+  entry = text[text.index("\nENTRY"):]
+  entry = entry[:entry.index("\n}\n")]
+  loops = [line for line in entry.splitlines() if " while(" in line]
+  hoisted = [line.split(" = ")[0].strip() for line in loops if "/while/body/" in line]
+  assert loops and not hoisted, f"{len(hoisted)} loops of the rerun loop's body run at every call: {hoisted}"
 
 
 def test_update_bounds_escape_mode_sequence():
