@@ -16,10 +16,11 @@ sharded program, above the one-device figure, the gain is from splitting).
 
 Same env as `rl train --randomize` (the built-in warehouse, --layouts layouts,
 seed 0) and its defaults (--num-steps 32, 8 minibatches, 4 epochs, 64 x 64).
-`--reset-capacity auto none` times each N both ways (one device): the fresh resets drawn only
-for the envs whose episode ended (`GymnaxAdapter`'s default, "auto") and for every env at every
-step ("none", the adapter before 2026-12-07); an integer sets the capacity. Sharded runs reset
-every env (`sims.rl.ppo.block_shuffle`).
+`--reset-capacity auto none` times each N both ways (one device, `--devices 1`): the fresh resets
+drawn only for the envs whose episode ended (`GymnaxAdapter`'s default, "auto") and for every env
+at every step ("none", the adapter before 2026-12-07); an integer sets the capacity. Over D > 1
+devices every run, the one-device ones included, resets every env: the sharded program does
+(`sims.rl.ppo.block_shuffle`), and `speedup` compares the same program.
 Every timed call's train state is checked: replicas identical across devices.
 """
 
@@ -63,8 +64,9 @@ def main(argv=None) -> int:
   ap.add_argument("--calls", type=int, default=3, help="timed calls (after one warm-up)")
   ap.add_argument("--layouts", type=int, default=16)
   ap.add_argument("--skip-ceiling", action="store_true", help="no one-device run at N / D envs")
-  ap.add_argument("--reset-capacity", nargs="+", default=["auto"],
-                  help="GymnaxAdapter reset_capacity values to time: auto, none or an integer >= 1 (default auto)")
+  ap.add_argument("--reset-capacity", nargs="+", default=None,
+                  help="with --devices 1: GymnaxAdapter reset_capacity values to time: auto, none or an integer "
+                       ">= 1 (default auto); over more devices every run resets every env")
   ap.add_argument("--json", action="store_true")
   ap.add_argument("--out", default=None)
   args = ap.parse_args(argv)
@@ -78,7 +80,7 @@ def main(argv=None) -> int:
     if getattr(args, name) < 1:
       ap.error(f"--{name.replace('_', '-')} must be >= 1; got {getattr(args, name)}")
   capacities = []
-  for c in args.reset_capacity:
+  for c in args.reset_capacity or ["auto"]:
     if c in ("auto", "none"):
       capacities.append(None if c == "none" else c)
     elif c.isascii() and c.isdigit() and int(c) >= 1:
@@ -86,6 +88,11 @@ def main(argv=None) -> int:
     else:
       ap.error(f"--reset-capacity: each value must be auto, none or an integer >= 1; got {c!r}")
   d = args.devices if args.devices is not None else len(jax.devices())
+  if d > 1:
+    if args.reset_capacity is not None:
+      ap.error(f"--reset-capacity times one-device runs (--devices 1); over {d} devices every run resets "
+               f"every env, as the sharded program does, so that the speedup compares the same program")
+    capacities = [None]
   try:
     mesh = sharding.make_mesh(d) if d != 1 else None
   except ValueError as e:
@@ -113,12 +120,11 @@ def main(argv=None) -> int:
       plan = [(n, 1, None)] if d == 1 else (
           [(n, d, mesh), (n, 1, None)] + ([] if args.skip_ceiling else [(n // d, 1, None)]))
       for envs, devs, m in plan:
-        # A sharded run resets every env whatever the capacity (block_shuffle): timed once.
-        for cap, adapter in list(adapters.items())[:1 if m is not None else None]:
+        for cap, adapter in adapters.items():
           algo = make_ppo(adapter, timesteps_per_call=args.iters * envs * args.num_steps, num_envs=envs,
                           num_steps=args.num_steps, num_minibatches=args.minibatches)
           r = _time_program(algo, m, args.calls)
-          r.update(num_envs=envs, devices=devs, reset_capacity=None if m is not None else cap,
+          r.update(num_envs=envs, devices=devs, reset_capacity=cap,
                    env_steps_per_s=r["env_steps_per_call"] / statistics.median(r["call_s"]))
           report["runs"].append(r)
           print(f"N={envs:>8d} devices={devs} reset_capacity={r['reset_capacity']}: "
@@ -126,9 +132,8 @@ def main(argv=None) -> int:
                 f"(compile {r['compile_s']:.1f} s, calls {', '.join(f'{c:.3f}' for c in r['call_s'])} s)",
                 file=sys.stderr, flush=True)
           save()
-      by = {(r["num_envs"], r["devices"]): r["env_steps_per_s"] for r in report["runs"]
-            if r["reset_capacity"] == capacities[0] or r["devices"] > 1}
       if d > 1:
+        by = {(r["num_envs"], r["devices"]): r["env_steps_per_s"] for r in report["runs"]}
         s = {"num_envs": n, "speedup": by[(n, d)] / by[(n, 1)]}
         if (n // d, 1) in by:
           s["per_device_ceiling"] = d * by[(n // d, 1)] / by[(n, 1)]
