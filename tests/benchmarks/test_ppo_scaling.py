@@ -1,6 +1,10 @@
-"""benchmarks/ppo_scaling.py: --reset-capacity values are checked before anything is built."""
+"""benchmarks/ppo_scaling.py: --reset-capacity values are checked before anything is built; one device
+times each capacity asked for, several devices compare programs that reset every env (the env, the
+PPO build and the timing stubbed: no compile)."""
 
 from __future__ import annotations
+
+import json
 
 import pytest
 
@@ -35,7 +39,6 @@ def _fake_build(monkeypatch, built):
 def test_a_run_over_devices_compares_programs_that_reset_every_env(monkeypatch, tmp_path):
   """The sharded program resets every env (block_shuffle), so its one-device baselines do too: the
   speedup compares the same program (they took the one-device default, resets of ended envs only)."""
-  import json
   built = []
   _fake_build(monkeypatch, built)
   out = tmp_path / "r.json"
@@ -47,7 +50,6 @@ def test_a_run_over_devices_compares_programs_that_reset_every_env(monkeypatch, 
 
 
 def test_one_device_times_each_reset_capacity(monkeypatch, tmp_path):
-  import json
   built = []
   _fake_build(monkeypatch, built)
   out = tmp_path / "r.json"
