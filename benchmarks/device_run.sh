@@ -9,6 +9,7 @@
 # RECIPE=1 retrains the shipped policy's recipe (examples/ppo_nav/README.md) cold, --no-cache, timed from the
 # interpreter's start, into $OUT/recipe (its results.json beside examples/ppo_nav/results.json; the
 # policy weights are not kept); RECIPE_TIMEOUT (default 200 s) bounds it;
+# LATENCY=1 runs benchmarks/latency.py (LATENCY_EXTRA adds options, LATENCY_TIMEOUT bounds it, default 240 s);
 # PROBES=1 adds the fleet breakdown (benchmarks/fleet_breakdown.py) to $OUT/fleet_breakdown.json;
 # TESTS=0 / BENCH=0 skip those parts. A summary table is printed last.
 # Fits the device tool's 10-minute call with RL=0 and PROBES=0.
@@ -85,6 +86,15 @@ if [ "${PPO_SCALING:-0}" = 1 ]; then
   timeout "${PPO_SCALING_TIMEOUT:-300}" python3 -m benchmarks.ppo_scaling --num-envs ${PPO_SCALING_ENVS:-1048576} \
     --calls 2 ${PPO_SCALING_EXTRA:-} --out "$OUT/ppo_scaling.json" > "$OUT/ppo_scaling.log" 2>&1
   echo "ppo_scaling rc=$?"; grep "^N=" "$OUT/ppo_scaling.log"
+fi
+
+if [ "${LATENCY:-0}" = 1 ]; then
+  # Microseconds per call at small and large batches beside the lean C++ loop and the dispatch floor,
+  # then the cold compiles (benchmarks/latency.py); LATENCY_EXTRA adds options (e.g. --no-compile).
+  echo "== latency -> $OUT/latency.json"
+  timeout "${LATENCY_TIMEOUT:-240}" python3 -m benchmarks.latency ${LATENCY_EXTRA:-} --json "$OUT/latency.json" \
+    > "$OUT/latency.log" 2>&1
+  echo "latency rc=$?"; grep '^|' "$OUT/latency.log"
 fi
 
 if [ "${RECIPE:-0}" = 1 ]; then

@@ -4,7 +4,8 @@
     python -m benchmarks.latency --quick         # B = 1, 8, 64 (a 2-core CPU in a minute or two)
     python -m benchmarks.latency --sizes 1,64 --no-compile
 
-For each keepout path (aligned: the mask at the costmap's resolution; other_res: a mask at
+The floor row times one add over the same costmaps (eager and jitted): what any call costs
+on the device. For each keepout path (aligned: the mask at the costmap's resolution; other_res: a mask at
 twice it; other_frame: a frame transform; aligned_escape: aligned with
 `override_lethal_cost` and every robot in a zone) and for the speed filter, the median
 microseconds per call over rotated input sets of 60 x 60 windows on a 2000 x 2000 mask:
@@ -141,6 +142,18 @@ def keepout_rows(path, b):
   return row
 
 
+def floor_rows(b):
+  """The dispatch floor: one add over the same B x 60 x 60 costmaps, eager and jitted (issue 31's
+  'trivial jitted op on the same host'); a filter call cannot be faster than this on the device."""
+  sets = [(keepout_inputs(s, b, HW, MASK, RES, False)[0].cost,) for s in range(2)]
+  eager = lambda c: c + 1
+  jitted = jax.jit(lambda c: c + 1)
+  row = dict(filter="floor", B=b)
+  row["eager_us"], row["eager_n"] = [v if k else v * 1e6 for k, v in enumerate(time_calls(eager, sets))]
+  row["jit_us"], row["jit_n"] = [v if k else v * 1e6 for k, v in enumerate(time_calls(jitted, sets))]
+  return row
+
+
 def speed_rows(b):
   sets = [(point_mask(s, MASK, 1, [0, 10, 30, 50, 100, -1]), random_poses(s, b, MASK * RES)) for s in range(2)]
   state = jf.SpeedState.create(b)
@@ -215,8 +228,8 @@ def main(argv=None):
   p = argparse.ArgumentParser(prog="python -m benchmarks.latency", description=__doc__.split("\n")[0])
   p.add_argument("--sizes", help="comma-separated batch sizes (default 1,8,64,1024,16384; --quick 1,8,64)")
   p.add_argument("--quick", action="store_true", help="B = 1, 8, 64 only (a CPU in a minute or two)")
-  p.add_argument("--paths", default=",".join(KEEPOUT_PATHS) + ",speed",
-                 help=f"rows to run, comma-separated from {', '.join(KEEPOUT_PATHS)}, speed")
+  p.add_argument("--paths", default="floor," + ",".join(KEEPOUT_PATHS) + ",speed",
+                 help=f"rows to run, comma-separated from floor, {', '.join(KEEPOUT_PATHS)}, speed")
   p.add_argument("--no-compile", dest="compile", action="store_false", help="skip the cold compile rows")
   p.add_argument("--entries", default=",".join(COLD_ENTRIES),
                  help=f"cold compile rows, comma-separated from {', '.join(COLD_ENTRIES)}")
@@ -229,9 +242,9 @@ def main(argv=None):
   if any(b < 1 for b in sizes):
     p.error(f"--sizes must be >= 1; got {args.sizes!r}")
   paths = [s for s in args.paths.split(",") if s]
-  unknown = [s for s in paths if s not in (*KEEPOUT_PATHS, "speed")]
+  unknown = [s for s in paths if s not in ("floor", *KEEPOUT_PATHS, "speed")]
   if unknown:
-    p.error(f"--paths: unknown {unknown}; choose from {', '.join(KEEPOUT_PATHS)}, speed")
+    p.error(f"--paths: unknown {unknown}; choose from floor, {', '.join(KEEPOUT_PATHS)}, speed")
   entries = [e for e in args.entries.split(",") if e]
   if any(e not in COLD_ENTRIES for e in entries):
     p.error(f"--entries: choose from {', '.join(COLD_ENTRIES)}; got {args.entries!r}")
@@ -241,7 +254,7 @@ def main(argv=None):
   rows = []
   for path in paths:
     for b in sizes:
-      rows.append(speed_rows(b) if path == "speed" else keepout_rows(path, b))
+      rows.append(speed_rows(b) if path == "speed" else floor_rows(b) if path == "floor" else keepout_rows(path, b))
       r = rows[-1]
       print(f"{r['filter']:24s} B={b:6d} eager {r['eager_us']:10.1f} us  jit {r['jit_us']:10.1f} us"
             + (f"  lean C++ {r['lean_cpp_us']:10.1f} us" if "lean_cpp_us" in r else ""), flush=True)
