@@ -9,6 +9,13 @@ keepout path (exact per-cell, the same-frame slice and gather, both batch loops 
 the packed words, a finer mask, the other-frame loop, the Pallas kernels in the
 interpreter) must give the closed-form integers and the float64 reference's, for both
 rules, in plain and escape mode.
+
+Each fast path runs as an eager call runs it: the program of its `plan.make_plan` plan, which
+has no exact reruns in it and reports the robots it leaves open (none here: the table's cell
+centres are mid-cell). The program a caller's `jit` compiles (the same kernels, with the exact
+reruns of open robots inside) runs for both rules on the two loops; its composition is held to
+the exact path on random fleets by test_keepout_paths*.py. The reruns made the file's 34
+programs take ~80 s to compile on a 2-core CPU; the plan programs take ~0.5 s each.
 """
 
 import dataclasses
@@ -20,7 +27,7 @@ import pytest
 
 from jaxfilters import keepout as ko
 from jaxfilters.grid import OccupancyGrid
-from jaxfilters.keepout import common, packed, process
+from jaxfilters.keepout import common, packed, plan, process
 from jaxfilters.types import Costmap, FilterInfo, FilterMask
 from reference import nav2 as reference
 
@@ -58,11 +65,20 @@ def _table(mask_scale=1):
   return cm, mask, common.fill_error(state, 2), data
 
 
-def _run(cm, mask, state, config, *, exact=False, loop="auto", transform=None):
+def _run(cm, mask, state, config, *, exact=False, loop="auto", transform=None, eager=False):
+  """The batch's cost as int64. `eager`: the program an eager call runs (its plan, no exact reruns
+  inside), which must leave no robot open on the table."""
   idx, ok, _, en, win, tf = common.batched_inputs(cm, mask, jnp.zeros((2, 3)), None, None, None, transform,
                                                   "test")
-  out, _ = process.filter_batch(cm, mask, idx, ok, state, win, en, tf, config=config, exact=exact, loop=loop)
-  return np.asarray(out.cost).astype(np.int64)
+  run_plan = None
+  if eager:
+    run_plan = plan.make_plan(cm, mask, state, None, None, None, transform, aligned=config.aligned_fast_path,
+                              loop=process._loop(loop))
+  res = process.filter_batch(cm, mask, idx, ok, state, win, en, tf, config=config, exact=exact, loop=loop,
+                             plan=run_plan)
+  if eager:
+    assert not np.asarray(res[2]).any(), "the table left a robot open: its cells would be redone exactly"
+  return np.asarray(res[0].cost).astype(np.int64)
 
 
 # Off a GPU the kernels run in the Pallas interpreter; on a GPU compiled (the interpreter of the
@@ -87,20 +103,42 @@ ESCAPE_PATHS = ("exact", "slice_vmap_packed", "pallas_aligned", "finer_mask_vmap
 CASES = [(p, False) for p in PATHS] + [(p, True) for p in ESCAPE_PATHS]
 
 
-@pytest.mark.parametrize("rule", RULES)
-@pytest.mark.parametrize("path,escape", CASES, ids=[p + ("_escape" if e else "") for p, e in CASES])
-def test_every_path_applies_the_chosen_rule(path, rule, escape):
+def _check_path(path, rule, escape, *, eager):
   spec = PATHS[path]
   cm, mask, state, _ = _table(spec.get("scale", 1))
   config = ko.KeepoutConfig(unknown_overwrite=rule, override_lethal_cost=escape,
                             lethal_override_cost=OVERRIDE_COST, **spec.get("cfg", {}))
   transform = jnp.zeros((2, 3), jnp.float32) if spec.get("transform") else None
-  got = _run(cm, mask, state, config, exact=spec.get("exact", False), loop=spec.get("loop", "auto"),
-             transform=transform)
+  exact = spec.get("exact", False)
+  got = _run(cm, mask, state, config, exact=exact, loop=spec.get("loop", "auto"), transform=transform,
+             eager=eager and not exact)
   old = np.asarray(cm.cost[0]).astype(np.int64)
   d = np.broadcast_to(VALUES.astype(np.int64), (H, W))
   np.testing.assert_array_equal(got[0], _closed_form(old, d, rule, None))
   np.testing.assert_array_equal(got[1], _closed_form(old, d, rule, OVERRIDE_COST if escape else None))
+
+
+@pytest.mark.parametrize("rule", RULES)
+@pytest.mark.parametrize("path,escape", CASES, ids=[p + ("_escape" if e else "") for p, e in CASES])
+def test_every_path_applies_the_chosen_rule(path, rule, escape):
+  _check_path(path, rule, escape, eager=True)
+
+
+def test_the_vectorised_plan_takes_the_kernel_each_path_names():
+  """The plans of the vectorised loop's paths pick the kernel the path is named for (slice or gather)."""
+  for path, sliced in (("slice_vmap_packed", True), ("gather_vmap", False), ("finer_mask_vmap", False)):
+    spec = PATHS[path]
+    cm, mask, state, _ = _table(spec.get("scale", 1))
+    aligned = ko.KeepoutConfig(**spec.get("cfg", {})).aligned_fast_path
+    assert plan.make_plan(cm, mask, state, None, None, None, None, aligned=aligned, loop="vmap").all_sliced == sliced
+
+
+@pytest.mark.parametrize("rule", RULES)
+@pytest.mark.parametrize("path", ["slice_map", "slice_vmap_packed"])
+def test_the_jitted_program_applies_the_chosen_rule(path, rule):
+  """What a caller's `jit` compiles: the fast path with the exact reruns inside (escape mode: robot 0
+  plain, robot 1 in a zone)."""
+  _check_path(path, rule, True, eager=False)
 
 
 @pytest.mark.parametrize("rule", RULES)
