@@ -11,7 +11,8 @@
 # policy weights are not kept); RECIPE_TIMEOUT (default 200 s) bounds it;
 # LATENCY=1 runs benchmarks/latency.py (LATENCY_EXTRA adds options, LATENCY_TIMEOUT bounds it, default 240 s);
 # PROBES=1 adds the fleet breakdown (benchmarks/fleet_breakdown.py) to $OUT/fleet_breakdown.json;
-# TESTS=0 / BENCH=0 skip those parts. A summary table is printed last.
+# TESTS=0 / BENCH=0 skip those parts; BENCH_EXTRA adds options to the benchmarks (e.g. "--only
+# keepout_aligned"). A summary table is printed last.
 # Fits the device tool's 10-minute call with RL=0 and PROBES=0.
 set -u
 OUT="${OUT:-/tmp/out}"
@@ -57,7 +58,7 @@ fi
 
 if [ "${BENCH:-1}" = 1 ]; then
 echo "== benchmarks (full sizes) -> $OUT/bench.json"
-timeout "${BENCH_TIMEOUT:-330}" python3 -m benchmarks --json --out "$OUT/bench.json" > /dev/null 2> "$OUT/bench.stderr"
+timeout "${BENCH_TIMEOUT:-330}" python3 -m benchmarks --json ${BENCH_EXTRA:-} --out "$OUT/bench.json" > /dev/null 2> "$OUT/bench.stderr"
 echo "bench rc=$?"
 fi
 
