@@ -37,3 +37,13 @@ def fleet(rng, res, mres, origins, mask_origins, *, windows=None, b=B):
   state = dataclasses.replace(KeepoutState.create(b), is_pose_lethal=jnp.asarray(rng.random(b) < 0.5))
   enabled = jnp.asarray(rng.random(b) < 0.9).at[0].set(True)
   return cm, mask, state, np.asarray(windows, np.int32), rng.integers(0, M, b).astype(np.int32), enabled
+
+
+def fleet_with_lower_parts(rng, res, mres, origins, mask_origins, *, b, windows=None):
+  """`fleet` with zero lower parts where the geometry is exactly float32 (same sums), so that every
+  such fleet has one pytree layout and each path compiles once."""
+  cm, mask, state, windows, idx, enabled = fleet(rng, res, mres, origins, mask_origins, windows=windows, b=b)
+  z = lambda a, shape: jnp.zeros(shape, jnp.float32) if a is None else a
+  cm = dataclasses.replace(cm, origin_lo=z(cm.origin_lo, (b, 2, 2)), resolution_lo=z(cm.resolution_lo, (b, 2)))
+  mask = dataclasses.replace(mask, origin_lo=z(mask.origin_lo, (M, 2, 2)))
+  return cm, mask, state, windows, idx, enabled

@@ -6,10 +6,11 @@ and redoes exactly the few robots a bracket leaves open (an update window or a c
 centre exactly on a mask-cell edge). Inside a caller's `jit` that redo is part of the
 program. An eager call (concrete inputs: a notebook cell, a Python control loop) instead
 runs the fast path with a static `Plan` and no redo in it: the program returns which
-robots need the exact arithmetic, and the host redoes only those (`process.py`) with
-the jitted program (the fast path with its exact reruns) on a small sub-fleet whose
-size is a power of two (compiled once per power, whatever the fleet's B), so a call
-where no robot needs it compiles and runs none of the exact arithmetic.
+robots need the exact arithmetic, and the host redoes only those (`process.py`): a few
+robots of the same frame in integer arithmetic on the host (`host_exact.py`, nothing to
+compile), else a jitted exact program on a small sub-fleet whose size is a power of two
+(compiled once per power, whatever the fleet's B), so a call where no robot needs it
+compiles and runs none of the exact arithmetic.
 
 On the vectorised loop (GPU) the slice kernel serves only a fleet whose robots are all
 sliced: `make_plan` reads that from one small program first.

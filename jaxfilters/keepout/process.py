@@ -26,7 +26,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from jaxfilters.keepout import pallas, plan
+from jaxfilters.keepout import host_exact, pallas, plan
 from jaxfilters.keepout.common import batched_inputs, check_batched_inputs, fill_error, usable_geometry
 from jaxfilters.keepout.config import KeepoutConfig, KeepoutState
 from jaxfilters.keepout.other_frame import other_frame_batch
@@ -97,34 +97,46 @@ def keepout_filter(costmap: Costmap, mask: FilterMask, poses, state: KeepoutStat
   run_plan = plan.make_plan(costmap, mask, state, *inputs, aligned=config.aligned_fast_path, loop=_loop("auto"))
   out, new_state, needs, batched = _eager_batch(costmap, mask, state, *inputs, config=config, plan=run_plan)
   redo = np.flatnonzero(np.asarray(needs))
-  if redo.size and (jax.default_backend() != "cpu" or redo.size > HOST_REDO_MAX_FRACTION * costmap.num_robots):
+  if not redo.size:
+    return out, new_state
+  cpu = _cpu_backend()
+  idx, idx_ok, window, enabled, transform = batched
+  if state.error is None:
+    state = dataclasses.replace(state, error=np.zeros((costmap.num_robots,), bool))
+  size = max(8, 1 << int(redo.size - 1).bit_length())      # a power of two: one compile serves many calls
+  sel = np.concatenate([redo, np.full(size - redo.size, redo[0])])
+  if redo.size <= EXACT_PATH_REDO_MAX and transform is None:
+    # A few robots of the same frame: the exact path in integer arithmetic on the host (host_exact.py),
+    # nothing to compile. Only their rows travel: on a CPU through NumPy, elsewhere gathered on the
+    # device (one small gather and scatter per B and power of two).
+    take = (lambda x: np.asarray(x)[redo]) if cpu else (lambda x: np.asarray(jnp.asarray(x)[sel])[:redo.size])
+    sub = jax.tree.map(take, (costmap, idx, idx_ok, state, window, enabled))
+    done = host_exact.redo(*sub, None, mask=mask, config=config)
+    if done is not None:
+      return jax.tree.map(lambda x, v: put_rows(x, v, redo, sel, cpu), (out, new_state), done)
+  if not cpu or redo.size > HOST_REDO_MAX_FRACTION * costmap.num_robots:
     # The host redo moves the whole fleet's costmaps through the host: on a GPU that copy costs more
     # than the filter (an H200 at B = 16,384: 91 ms against 0.85 ms jitted), and on a CPU a redo of
     # many robots costs more than the whole program. The fleet then runs once more on the device,
     # the exact reruns inside the program (what a caller's jit runs).
     return _eager_batch(costmap, mask, state, *inputs, config=config)
-  if redo.size:
-    idx, idx_ok, window, enabled, transform = batched
-    size = max(8, 1 << int(redo.size - 1).bit_length())      # a power of two: one compile serves many calls
-    sel = np.concatenate([redo, np.full(size - redo.size, redo[0])])
-    # On the host (NumPy): a device gather and scatter would compile once per B.
-    if state.error is None:
-      state = dataclasses.replace(state, error=np.zeros((costmap.num_robots,), bool))
-    sub = jax.tree.map(lambda x: np.asarray(x)[sel], (costmap, idx, idx_ok, state, window, enabled, transform))
-    sub_out, sub_state = exact_redo(*sub, mask=mask, config=config, exact=size <= EXACT_PATH_REDO_MAX)
-    # The padding slots (robot redo[0] again) are dropped.
-    out, new_state = jax.tree.map(lambda x, v: _put(x, v, redo), (out, new_state), (sub_out, sub_state))
-  return out, new_state
+  # On the host (NumPy): a device gather and scatter would compile once per B.
+  sub = jax.tree.map(lambda x: np.asarray(x)[sel], (costmap, idx, idx_ok, state, window, enabled, transform))
+  sub_out, sub_state = exact_redo(*sub, mask=mask, config=config, exact=size <= EXACT_PATH_REDO_MAX)
+  # The padding slots (robot redo[0] again) are dropped.
+  return jax.tree.map(lambda x, v: put_rows(x, v, redo, sel, cpu), (out, new_state), (sub_out, sub_state))
 
 
 # An eager call redoes on the host at most this fraction of its robots (see keepout_filter).
 HOST_REDO_MAX_FRACTION = 0.25
-# A host redo of at most this many robots (the power-of-two sub-fleet) runs the exact per-cell path
-# itself: on this project's 2-core CPU it compiles in ~1.5-1.7 s (at level 1, see _EXACT_JITS)
-# against ~8 s for the fast path with its exact reruns (the README's first call at B = 4,096 redoes 6
-# robots), and runs 8 / 16 robots of 60 x 60 in 2.3 / 4.7 ms. Larger sub-fleets run the fast path
-# with the exact reruns in it, whose run time grows far slower with the robots (20 ms at 256, where
-# the exact path compiled at level 0 took 380 ms).
+# A host redo of at most this many robots (the power-of-two sub-fleet) runs the exact path: same
+# frame in integer arithmetic on the host (host_exact.py: nothing to compile; the first call at
+# B = 4,096 of benchmarks/latency.py redoes 6 robots, whose exact program compiled for ~1.5 s of its
+# ~2.8 s on this project's 2-core CPU), else (a frame transform) the exact per-cell program (at level
+# 1, see _EXACT_JITS: ~1.5-1.7 s to compile against ~8 s for the fast path with its exact reruns;
+# 8 / 16 robots of 60 x 60 in 2.3 / 4.7 ms). Larger sub-fleets run the fast path with the exact
+# reruns in it, whose run time grows far slower with the robots (20 ms at 256, where the exact path
+# compiled at level 0 took 380 ms).
 EXACT_PATH_REDO_MAX = 16
 
 
@@ -140,10 +152,21 @@ def _eager_batch(costmap, mask, state, mask_index, enabled, window, transform, *
   return out if plan is None else (*out, (idx, idx_ok, window, enabled, transform))
 
 
-def _put(x, v, rows):
-  a = np.array(x)
-  a[rows] = np.asarray(v)[:rows.size]
-  return jax.device_put(a)
+def _cpu_backend() -> bool:
+  """Whether the arrays live in host memory (the eager redo's rows then travel through NumPy)."""
+  return jax.default_backend() == "cpu"
+
+
+def put_rows(x, v, rows, sel, cpu):
+  """x with rows `rows` set to the first rows of v: on a CPU through NumPy, elsewhere a scatter on the
+  device over the padded rows `sel` (the padding repeats rows[0] with its own new value)."""
+  v = np.asarray(v)[:rows.size]
+  if cpu:
+    a = np.array(x)
+    a[rows] = v
+    return jax.device_put(a)
+  v = np.concatenate([v, np.repeat(v[:1], sel.size - rows.size, axis=0)])
+  return jnp.asarray(x).at[sel].set(v)
 
 
 def _loop(loop: str) -> str:

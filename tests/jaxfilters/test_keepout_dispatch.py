@@ -2,8 +2,10 @@
 
 Eager (concrete inputs): the fast path runs with no exact redo in it and reports the
 robots whose float32 brackets were left open; only those are redone in a sub-fleet whose size is
-a power of two (plan.py): up to `process.EXACT_PATH_REDO_MAX` robots by the exact per-cell path
-itself (the cheaper compile), more by the jitted program with its exact reruns. The results are
+a power of two (plan.py): up to `process.EXACT_PATH_REDO_MAX` robots in integer arithmetic on the
+host (keepout/host_exact.py, same frame; nothing to compile) or, where that declines (a frame
+transform), by the exact per-cell path's program; more by the jitted program with its exact
+reruns. The results are
 the exact path's integers, also on fleets built to put cell centres exactly on
 mask-cell edges. The CPU loop's programs hold no conditional: eager, nothing but the
 robot loop (none at all for one robot); jitted, the exact redo as loops of
@@ -21,7 +23,7 @@ import numpy as np
 import pytest
 
 import jaxfilters as jf
-from jaxfilters.keepout import common, process
+from jaxfilters.keepout import common, host_exact, process
 from jaxfilters.keepout.plan import Plan
 from tests.compile_count import count_compiles
 from tests.keepout_fleets import B, W, WM, fleet
@@ -103,20 +105,33 @@ def test_a_larger_host_redo_runs_the_fast_path_with_its_exact_reruns(config, mon
 
 
 @pytest.mark.parametrize("config", [PLAIN, ESCAPE], ids=["plain", "escape"])
-def test_a_small_host_redo_runs_the_exact_path(config, monkeypatch):
+def test_a_small_host_redo_runs_in_integers_on_the_host(config, monkeypatch):
+  """Up to EXACT_PATH_REDO_MAX open robots of a same-frame call: host_exact, no device program (on
+  every backend: off a CPU only their rows travel)."""
+  assert _host_redo_programs(config, monkeypatch) == []
+
+
+@pytest.mark.parametrize("config", [PLAIN, ESCAPE], ids=["plain", "escape"])
+def test_a_small_host_redo_that_host_exact_declines_runs_the_exact_path(config, monkeypatch):
   if jax.default_backend() != "cpu":
     pytest.skip("off a CPU the open robots are redone on the device, never on the host")
+  monkeypatch.setattr(host_exact, "redo", lambda *a, **k: None)
   assert _host_redo_programs(config, monkeypatch) == [True]
 
 
 @pytest.mark.parametrize("config", [PLAIN, ESCAPE], ids=["plain", "escape"])
 def test_an_eager_call_with_many_open_robots_runs_the_fleet_on_the_device(config, monkeypatch):
-  """Past HOST_REDO_MAX_FRACTION (and always on a GPU, where the host copy of the fleet cost 100x the
-  filter) the eager call runs the whole fleet once more with the exact reruns in the program."""
+  """Past EXACT_PATH_REDO_MAX open robots and HOST_REDO_MAX_FRACTION (and always on a GPU, where the
+  host copy of the fleet cost 100x the filter) the eager call runs the whole fleet once more with the
+  exact reruns in the program."""
   from jaxfilters.keepout import process
   case = _edges()
   monkeypatch.setattr(process, "HOST_REDO_MAX_FRACTION", 0.0)
+  monkeypatch.setattr(process, "EXACT_PATH_REDO_MAX", 0)
+  ran = []
+  monkeypatch.setattr(host_exact, "redo", lambda *a, **k: ran.append(1))
   _assert_equal(_eager(case, config), _exact(case, config))
+  assert ran == []
 
 
 def test_eager_other_frame_call_equals_the_exact_path():

@@ -14,7 +14,6 @@ compiled aligned path outside a branch taken only when some robot needs the exac
 arithmetic.
 """
 
-import dataclasses
 import math
 import re
 from fractions import Fraction
@@ -31,7 +30,7 @@ from jaxfilters.keepout import pallas as kp
 from jaxfilters import mask_lookup
 from benchmarks.keepout_paths import path_report
 from tests import keepout_fleets
-from tests.keepout_fleets import H, HM, M, W, WM
+from tests.keepout_fleets import H, HM, W, WM
 
 B = 8
 PLAIN = ko.KeepoutConfig()
@@ -47,14 +46,8 @@ def _nudge(x, steps):
 
 
 def _fleet(rng, res, mres, origins, mask_origins, *, windows=None):
-  """`keepout_fleets.fleet` of B robots, with zero lower parts where the geometry is exactly float32."""
-  cm, mask, state, windows, idx, enabled = keepout_fleets.fleet(rng, res, mres, origins, mask_origins,
-                                                                windows=windows, b=B)
-  # Zero lower parts where the geometry is exactly float32 (same sums): one pytree layout, one compile.
-  z = lambda a, shape: jnp.zeros(shape, jnp.float32) if a is None else a
-  cm = dataclasses.replace(cm, origin_lo=z(cm.origin_lo, (B, 2, 2)), resolution_lo=z(cm.resolution_lo, (B, 2)))
-  mask = dataclasses.replace(mask, origin_lo=z(mask.origin_lo, (M, 2, 2)))
-  return cm, mask, state, windows, idx, enabled
+  """`keepout_fleets.fleet_with_lower_parts` of B robots."""
+  return keepout_fleets.fleet_with_lower_parts(rng, res, mres, origins, mask_origins, windows=windows, b=B)
 
 
 def _cases():

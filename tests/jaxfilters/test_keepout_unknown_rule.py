@@ -65,6 +65,11 @@ def _table(mask_scale=1):
   return cm, mask, common.fill_error(state, 2), data
 
 
+def _resolved(loop):
+  """The loop "auto" stands for on this backend (process.py)."""
+  return ("map" if jax.default_backend() == "cpu" else "vmap") if loop == "auto" else loop
+
+
 def _run(cm, mask, state, config, *, exact=False, loop="auto", transform=None, eager=False):
   """The batch's cost as int64. `eager`: the program an eager call runs (its plan, no exact reruns
   inside), which must leave no robot open on the table."""
@@ -73,7 +78,7 @@ def _run(cm, mask, state, config, *, exact=False, loop="auto", transform=None, e
   run_plan = None
   if eager:
     run_plan = plan.make_plan(cm, mask, state, None, None, None, transform, aligned=config.aligned_fast_path,
-                              loop=process._loop(loop))
+                              loop=_resolved(loop))
   res = process.filter_batch(cm, mask, idx, ok, state, win, en, tf, config=config, exact=exact, loop=loop,
                              plan=run_plan)
   if eager:
