@@ -22,7 +22,6 @@ given (slow: the reference is a Python loop). #6109 reports Nav2's own C++ at 1.
 
 from __future__ import annotations
 
-import argparse
 import os
 import time
 
@@ -35,6 +34,7 @@ import jax.numpy as jnp  # noqa: E402
 
 import jaxfilters as jf  # noqa: E402
 from benchmarks.latency import time_calls  # noqa: E402
+from jaxfilters.cli import ArgumentParser  # noqa: E402
 
 N = 800
 RES = 0.05
@@ -102,7 +102,7 @@ def table(rows) -> str:
 
 
 def main(argv=None):
-  p = argparse.ArgumentParser(prog="python -m benchmarks.asymmetric", description=__doc__.split("\n")[0])
+  p = ArgumentParser(prog="python -m benchmarks.asymmetric", description=__doc__.split("\n")[0])
   p.add_argument("--sizes", help="comma-separated batch sizes (default 1,8 on a CPU, 1,16,256 on a GPU)")
   p.add_argument("--poses", type=int, default=400, help="poses per plan, one every 0.05 m (default 400: 20 m)")
   p.add_argument("--reps", type=int, default=7, help="timed calls per row (median)")

@@ -33,7 +33,6 @@ robot-seconds per wall second), ns_per_robot_step and compile_s, plus `parts_ns`
 
 from __future__ import annotations
 
-import argparse
 import contextlib
 import dataclasses
 import functools
@@ -55,6 +54,7 @@ from sims.scale import bench
 from sims.fleet import navigation, planner  # noqa: E402
 from sims.fleet.config import FleetConfig  # noqa: E402
 from sims.fleet.env import FleetEnv, WorldState, mjx_step  # noqa: E402
+from jaxfilters.cli import ArgumentParser  # noqa: E402
 
 _F32 = jnp.float32
 _TWIST = (0.4, 0.3)   # m/s, rad/s: the constant command of the variants without a planner (as bare_mjx)
@@ -286,7 +286,7 @@ def parts(results: dict, key: str = "ns_per_robot_step") -> dict:
 
 
 def main(argv=None) -> int:
-  ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
+  ap = ArgumentParser(description=__doc__.split("\n")[0])
   ap.add_argument("num_robots", nargs="?", type=int, default=512, help="B, robots in all (default 512)")
   ap.add_argument("--steps", type=int, default=100, help="physics steps per timed call (default 100)")
   ap.add_argument("--repeats", type=int, default=3, help="timed calls per variant, best kept (default 3)")

@@ -24,7 +24,6 @@ device is JAX's default one.
 
 from __future__ import annotations
 
-import argparse
 import json
 import os
 import subprocess
@@ -42,6 +41,7 @@ import jax.numpy as jnp  # noqa: E402
 import jaxfilters as jf  # noqa: E402
 from benchmarks import nav2_peer  # noqa: E402
 from benchmarks.run import RES, keepout_inputs, point_mask, random_poses  # noqa: E402
+from jaxfilters.cli import ArgumentParser  # noqa: E402
 
 HW = 60
 MASK = 2000
@@ -225,7 +225,7 @@ def table(rows):
 
 
 def main(argv=None):
-  p = argparse.ArgumentParser(prog="python -m benchmarks.latency", description=__doc__.split("\n")[0])
+  p = ArgumentParser(prog="python -m benchmarks.latency", description=__doc__.split("\n")[0])
   p.add_argument("--sizes", help="comma-separated batch sizes (default 1,8,64,1024,16384; --quick 1,8,64)")
   p.add_argument("--quick", action="store_true", help="B = 1, 8, 64 only (a CPU in a minute or two)")
   p.add_argument("--paths", default="floor," + ",".join(KEEPOUT_PATHS) + ",speed",

@@ -9,14 +9,14 @@ reports the others; the JSON names the error.
 
 from __future__ import annotations
 
-import argparse
 import json
 import sys
 import traceback
+from jaxfilters.cli import ArgumentParser  # one-line errors, exit code 2
 
 
 def main(argv=None) -> int:
-  parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+  parser = ArgumentParser(description=__doc__.splitlines()[0])
   parser.add_argument("--robots", type=int, default=65536)
   parser.add_argument("--steps", type=int, default=100)
   parser.add_argument("--impls", default="jax,warp")

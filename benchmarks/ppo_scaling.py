@@ -26,7 +26,6 @@ Every timed call's train state is checked: replicas identical across devices.
 
 from __future__ import annotations
 
-import argparse
 import json
 import statistics
 import sys
@@ -34,6 +33,7 @@ import time
 
 import jax
 import numpy as np
+from jaxfilters.cli import ArgumentParser  # one-line errors, exit code 2
 
 
 def _time_program(algo, mesh, calls: int) -> dict:
@@ -55,7 +55,7 @@ def _time_program(algo, mesh, calls: int) -> dict:
 
 
 def main(argv=None) -> int:
-  ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+  ap = ArgumentParser(description=__doc__.split("\n\n")[0])
   ap.add_argument("--num-envs", type=int, nargs="+", default=[65536])
   ap.add_argument("--devices", type=int, default=None, help="devices to shard over (default all)")
   ap.add_argument("--num-steps", type=int, default=32)

@@ -24,7 +24,6 @@ that the script works); the full sizes are for a GPU (`RL=1 bash benchmarks/devi
 
 from __future__ import annotations
 
-import argparse
 import json
 import math
 import sys
@@ -34,7 +33,7 @@ import jaxfilters  # noqa: F401  (first: importing it sets the XLA:CPU flags, ja
 
 import jax  # noqa: E402
 import jax.numpy as jnp  # noqa: E402
-import numpy as np  # noqa: E402
+from jaxfilters.cli import ArgumentParser  # noqa: E402
 
 
 def _sizes(quick: bool, platform: str) -> dict:
@@ -140,7 +139,7 @@ def bench_ppo(env, n, num_steps, calls) -> dict:
 
 
 def main(argv=None) -> int:
-  ap = argparse.ArgumentParser(prog="python -m benchmarks.rl_bench", description=__doc__.splitlines()[0])
+  ap = ArgumentParser(prog="python -m benchmarks.rl_bench", description=__doc__.splitlines()[0])
   ap.add_argument("--quick", action="store_true", help="tiny sizes (a CPU check that everything runs)")
   ap.add_argument("--json", action="store_true", help="print the JSON report on stdout")
   ap.add_argument("--out", default=None, help="also write the JSON report to this file")

@@ -17,7 +17,6 @@ without a compiler `cpp_peer` / `cpp_lean_peer` say why they were skipped.
 
 from __future__ import annotations
 
-import argparse
 import inspect
 import json
 import math
@@ -34,6 +33,7 @@ import jaxfilters as jf
 from jaxfilters.grid import OccupancyGrid
 
 from benchmarks import nav2_peer
+from jaxfilters.cli import ArgumentParser  # one-line errors, exit code 2
 
 RES = 0.05
 # The keepout figures of `bench_keepout` / `bench_keepout_pallas` and their masks' resolution.
@@ -515,7 +515,7 @@ def table(report) -> str:
 
 
 def main(argv=None) -> int:
-  ap = argparse.ArgumentParser(prog="python -m benchmarks", description=__doc__.splitlines()[0])
+  ap = ArgumentParser(prog="python -m benchmarks", description=__doc__.splitlines()[0])
   ap.add_argument("--json", action="store_true", help="print one JSON object on stdout")
   ap.add_argument("--quick", action="store_true", help="small sizes (CPU smoke run)")
   ap.add_argument("--only", default="", help=f"comma-separated subset of {','.join(NAMES)}")

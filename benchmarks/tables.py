@@ -18,12 +18,12 @@ by `range_over`); every other value is one measurement.
 
 from __future__ import annotations
 
-import argparse
 import json
 import sys
 from pathlib import Path
 
 from benchmarks.run import roofline_label
+from jaxfilters.cli import ArgumentParser  # one-line errors, exit code 2
 
 ROOT = Path(__file__).resolve().parents[1]
 RESULTS = ROOT / "benchmarks" / "results"
@@ -301,7 +301,7 @@ def split(text: str) -> tuple[str, str]:
 
 
 def main(argv=None) -> int:
-  ap = argparse.ArgumentParser(prog="python -m benchmarks.tables", description=__doc__.splitlines()[0])
+  ap = ArgumentParser(prog="python -m benchmarks.tables", description=__doc__.splitlines()[0])
   mode = ap.add_mutually_exclusive_group()
   mode.add_argument("--write", action="store_true", help="rewrite the generated top of BENCHMARKS.md")
   mode.add_argument("--check", action="store_true", help="exit 1 if BENCHMARKS.md's top differs")

@@ -23,10 +23,10 @@ test in tests/fleet/test_scenario.py checks every value through `load_map`.
 
 from __future__ import annotations
 
-import argparse
 from pathlib import Path
 
 import numpy as np
+from jaxfilters.cli import ArgumentParser  # one-line errors, exit code 2
 
 ASSETS = Path(__file__).resolve().parents[1] / "assets"
 RESOLUTION = 0.05
@@ -146,7 +146,7 @@ def write(out_dir: Path = ASSETS) -> list[Path]:
 
 def main(argv=None) -> None:
   """`python -m sims.commands.make_default_scenario [--out DIR]`: writes the files and prints their paths."""
-  parser = argparse.ArgumentParser(prog="python -m sims.commands.make_default_scenario",
+  parser = ArgumentParser(prog="python -m sims.commands.make_default_scenario",
                                    description=__doc__.splitlines()[0])
   parser.add_argument("--out", type=Path, default=ASSETS, help="output folder (default sims/assets)")
   args = parser.parse_args(argv)

@@ -12,10 +12,10 @@ tests/project/test_readme.py checks against the `fleet` defaults.
 
 from __future__ import annotations
 
-import argparse
 import json
 import sys
 from pathlib import Path
+from jaxfilters.cli import ArgumentParser  # one-line errors, exit code 2
 
 DEMO_COMMAND = ["fleet", "--out", "out/demo"]     # what `make demo` runs after `jaxfilters`
 TEXT_KEY = "jaxfilters-demo"
@@ -39,7 +39,7 @@ def picture_text(summary: dict) -> dict:
 
 def main(argv=None) -> int:
   """Checks the demo run, writes the copy; returns the exit code (2: not a `make demo` run)."""
-  ap = argparse.ArgumentParser(prog="python -m sims.commands.readme_picture", description=__doc__.splitlines()[0],
+  ap = ArgumentParser(prog="python -m sims.commands.readme_picture", description=__doc__.splitlines()[0],
                                epilog="exit codes: 0 ok, 2 the folder is not a `make demo` run")
   ap.add_argument("demo", type=Path, help="the demo's output folder (out/demo)")
   ap.add_argument("dest", type=Path, help="the README's picture (docs/demo.png)")

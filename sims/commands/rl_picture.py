@@ -12,11 +12,11 @@ Exit codes: 0 written, 2 a policy folder that cannot be loaded or a bad option.
 
 from __future__ import annotations
 
-import argparse
 import sys
 from pathlib import Path
 
 import numpy as np
+from jaxfilters.cli import ArgumentParser  # one-line errors, exit code 2
 
 
 def rollout(env, policy, layout: int, key, steps: int):
@@ -45,7 +45,7 @@ def rollout(env, policy, layout: int, key, steps: int):
 
 
 def main(argv=None) -> int:
-  ap = argparse.ArgumentParser(prog="python -m sims.commands.rl_picture",
+  ap = ArgumentParser(prog="python -m sims.commands.rl_picture",
                                description="Draw a policy's episodes in zone layouts it never saw into a PNG.")
   ap.add_argument("policy", type=Path, help="policy folder written by jaxfilters rl train")
   ap.add_argument("out", type=Path, help="PNG to write")

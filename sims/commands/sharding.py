@@ -7,17 +7,17 @@
 
 from __future__ import annotations
 
-import argparse
 import sys
 
 import numpy as np
 
 from sims.scale import sharding
+from jaxfilters.cli import ArgumentParser  # one-line errors, exit code 2
 
 
 def main(argv=None) -> int:
   """One process of a multi-process sharded rollout; returns the exit code."""
-  ap = argparse.ArgumentParser(prog="python -m sims.commands.sharding",
+  ap = ArgumentParser(prog="python -m sims.commands.sharding",
                                description="One process of a multi-process (jax.distributed) sharded fleet rollout.")
   ap.add_argument("--coordinator", required=True, help="host:port of process 0 (e.g. 127.0.0.1:12355)")
   ap.add_argument("--num-processes", type=int, required=True, help="processes in the run")

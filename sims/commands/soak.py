@@ -19,7 +19,6 @@ check passed, 3 (the CLI's "a robot broke a rule") otherwise.
 
 from __future__ import annotations
 
-import argparse
 import json
 import sys
 import time
@@ -28,6 +27,7 @@ import jaxfilters  # noqa: F401  (first: importing it sets the XLA:CPU flags, ja
 
 import jax  # noqa: E402
 import numpy as np  # noqa: E402
+from jaxfilters.cli import ArgumentParser  # noqa: E402
 
 
 def _memory(device) -> tuple[str, int]:
@@ -121,7 +121,7 @@ def run_soak(*, num_worlds: int = 16, robots_per_world: int = 4, chunk_steps: in
 
 
 def main(argv=None) -> int:
-  ap = argparse.ArgumentParser(prog="python -m sims.commands.soak", description=__doc__.splitlines()[0],
+  ap = ArgumentParser(prog="python -m sims.commands.soak", description=__doc__.splitlines()[0],
                                epilog="exit codes: 0 every check passed, 2 bad option, 3 a check failed")
   ap.add_argument("--worlds", type=int, default=16, help="independent worlds (default 16)")
   ap.add_argument("--robots-per-world", type=int, default=4, help="robots per world (default 4)")
