@@ -1,7 +1,8 @@
 """Internal: the exact same-frame path for a few robots on the host, in integer arithmetic (no compile).
 
-An eager keepout call on a CPU redoes the few robots its fast path leaves open (a cell centre or
-a window edge within float32 rounding of a mask-cell edge: plan.py). The device's exact path
+An eager keepout call redoes the few robots its fast path leaves open (a cell centre or a window
+edge within float32 rounding of a mask-cell edge: plan.py; off a CPU their rows are gathered from
+the device and scattered back, process.py). The device's exact path
 (reference.py) decides every cell with float32 expansions, so it compiles for ~1.5 s on a
 2-core CPU, the larger part of an eager call's first run. Here the same integers come from
 Python integers: every input is a float32 or a host double carried as float32 parts, so each
@@ -57,10 +58,10 @@ def _floor_cells(origin, res, mask_origin, mask_res, n, size):
   p, q = mask_res.numerator, mask_res.denominator
   nums = [a_i + (2 * k + 1) * h_i for k in range(n)]
   cells = [(v * q) // (den * p) for v in nums]      # floor((a + (2k + 1) half) / mask_res)
-  if max(abs(cells[0]), abs(cells[-1])) >= _LIMIT:  # increasing in k: the ends bound every entry
+  if cells and max(abs(cells[0]), abs(cells[-1])) >= _LIMIT:  # increasing in k: the ends bound every entry
     return None
   cells = np.asarray(cells, np.int64)
-  valid = (np.asarray([v >= 0 for v in nums]) & (cells < size))
+  valid = np.asarray([v >= 0 for v in nums], bool) & (cells < size)
   return np.clip(cells, 0, size - 1), valid
 
 
