@@ -20,7 +20,10 @@ the integers of the exact per-cell path (reference.py):
 * other_resolution.py: the same frame, mask cells gathered through exact index vectors;
 * other_frame.py: a frame transform (SE2), floors decided with a proof or by edge tables;
 * packed.py: the word arithmetic of the vectorised kernels; pallas.py: the Pallas kernel
-  of `KeepoutConfig(kernel="pallas")`; common.py: what the path modules share.
+  of `KeepoutConfig(kernel="pallas")`; common.py: what the path modules share;
+* plan.py: an eager call's choices, made on the host before tracing; host_exact.py: the
+  exact same-frame path in integer arithmetic on the host, for the few robots an eager
+  call redoes (no program to compile).
 """
 
 from jaxfilters.keepout.bounds import keepout_update_bounds, keepout_update_bounds_one, pose_in_lethal_zone_one
