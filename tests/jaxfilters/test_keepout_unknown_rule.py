@@ -65,11 +65,6 @@ def _table(mask_scale=1):
   return cm, mask, common.fill_error(state, 2), data
 
 
-def _resolved(loop):
-  """The loop "auto" stands for on this backend (process.py)."""
-  return ("map" if jax.default_backend() == "cpu" else "vmap") if loop == "auto" else loop
-
-
 def _run(cm, mask, state, config, *, exact=False, loop="auto", transform=None, eager=False):
   """The batch's cost as int64. `eager`: the program an eager call runs (its plan, no exact reruns
   inside), which must leave no robot open on the table."""
@@ -77,8 +72,9 @@ def _run(cm, mask, state, config, *, exact=False, loop="auto", transform=None, e
                                                   "test")
   run_plan = None
   if eager:
+    assert loop in ("map", "vmap"), "an eager path names the loop its plan is made for"
     run_plan = plan.make_plan(cm, mask, state, None, None, None, transform, aligned=config.aligned_fast_path,
-                              loop=_resolved(loop))
+                              loop=loop)
   res = process.filter_batch(cm, mask, idx, ok, state, win, en, tf, config=config, exact=exact, loop=loop,
                              plan=run_plan)
   if eager:
@@ -95,7 +91,9 @@ PATHS = {
     "slice_vmap_packed": dict(loop="vmap"),
     "gather_map": dict(loop="map", cfg=dict(aligned_fast_path=False)),
     "gather_vmap": dict(loop="vmap", cfg=dict(aligned_fast_path=False)),
-    "pallas_aligned": dict(cfg=dict(kernel="pallas", pallas=INTERP)),
+    # The vectorised loop (a GPU's): its plan sends an all-sliced fleet to the Pallas kernel; the CPU's
+    # loop ("map") plans the gather kernel for it (process.py), which would not test the kernel.
+    "pallas_aligned": dict(loop="vmap", cfg=dict(kernel="pallas", pallas=INTERP)),
     "finer_mask_vmap": dict(loop="vmap", scale=3),
     "finer_mask_map": dict(loop="map", scale=3),
     "other_frame_map": dict(loop="map", transform=True, cfg=dict(frame_kernel="xla")),
@@ -130,8 +128,10 @@ def test_every_path_applies_the_chosen_rule(path, rule, escape):
 
 
 def test_the_vectorised_plan_takes_the_kernel_each_path_names():
-  """The plans of the vectorised loop's paths pick the kernel the path is named for (slice or gather)."""
-  for path, sliced in (("slice_vmap_packed", True), ("gather_vmap", False), ("finer_mask_vmap", False)):
+  """The plans of the vectorised loop's paths pick the kernel the path is named for (slice, or the Pallas
+  kernel, for an all-sliced fleet; gather)."""
+  for path, sliced in (("slice_vmap_packed", True), ("gather_vmap", False), ("finer_mask_vmap", False),
+                       ("pallas_aligned", True)):
     spec = PATHS[path]
     cm, mask, state, _ = _table(spec.get("scale", 1))
     aligned = ko.KeepoutConfig(**spec.get("cfg", {})).aligned_fast_path
