@@ -268,7 +268,7 @@ def check_mask(mask: FilterMask, where: str) -> None:
                        f"{tuple(d.shape)}); got {dt}{tuple(getattr(v, 'shape', ()))}")
 
 
-def mask_geometry_ok(mask: FilterMask) -> jax.Array:
+def mask_geometry_ok(mask: FilterMask, *, xp=jnp) -> jax.Array:
   """Whether each mask's geometry can be used, as a traced value: bool [M].
 
   `FilterMask.create` refuses bad geometry on the host; a mask whose leaves are
@@ -278,12 +278,13 @@ def mask_geometry_ok(mask: FilterMask) -> jax.Array:
   origin parts (`origin`, and `origin_lo` when present) are finite. Every filter
   and point query treats a robot or point on an unusable mask as it treats a bad
   mask index: `valid` False and `error` True (filters), the fill value (queries).
+  `xp=numpy` runs the same test on host arrays (no device op, nothing to compile).
   """
   r = mask.resolution
-  ok = jnp.isfinite(r) & (r >= validate.F32_TINY)
-  ok = ok & jnp.all(jnp.isfinite(mask.origin), axis=-1)
+  ok = xp.isfinite(r) & (r >= validate.F32_TINY)
+  ok = ok & xp.all(xp.isfinite(mask.origin), axis=-1)
   if mask.origin_lo is not None:
-    ok = ok & jnp.all(jnp.isfinite(mask.origin_lo), axis=(-2, -1))
+    ok = ok & xp.all(xp.isfinite(mask.origin_lo), axis=(-2, -1))
   return ok
 
 
@@ -452,18 +453,18 @@ def _traced_float(x, name: str, one: tuple[int, ...], full: tuple[int, ...]) -> 
   return jnp.broadcast_to(x.astype(jnp.float32), full)
 
 
-def costmap_geometry_ok(costmap: Costmap) -> jax.Array:
+def costmap_geometry_ok(costmap: Costmap, *, xp=jnp) -> jax.Array:
   """Whether each costmap's geometry can be used, as a traced value: bool [B].
 
-  As `mask_geometry_ok`: a resolution that is finite and at least the smallest
+  As `mask_geometry_ok` (`xp` too): a resolution that is finite and at least the smallest
   normal float32, finite origin parts (and finite `*_lo` parts when present).
   """
   r = costmap.resolution
-  ok = jnp.isfinite(r) & (r >= validate.F32_TINY) & jnp.all(jnp.isfinite(costmap.origin), axis=-1)
+  ok = xp.isfinite(r) & (r >= validate.F32_TINY) & xp.all(xp.isfinite(costmap.origin), axis=-1)
   if costmap.origin_lo is not None:
-    ok = ok & jnp.all(jnp.isfinite(costmap.origin_lo), axis=(-2, -1))
+    ok = ok & xp.all(xp.isfinite(costmap.origin_lo), axis=(-2, -1))
   if costmap.resolution_lo is not None:
-    ok = ok & jnp.all(jnp.isfinite(costmap.resolution_lo), axis=-1)
+    ok = ok & xp.all(xp.isfinite(costmap.resolution_lo), axis=-1)
   return ok
 
 

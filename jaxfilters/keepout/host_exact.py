@@ -35,7 +35,7 @@ import numpy as np
 
 from jaxfilters import constants
 from jaxfilters.keepout.config import KeepoutConfig, mask_cost_plus_one_table
-from jaxfilters.validate import F32_TINY
+from jaxfilters.types import costmap_geometry_ok, mask_geometry_ok
 
 _LIMIT = 2 ** 22                 # the device's exact floors are exact below this quotient
 _COST = (mask_cost_plus_one_table().astype(np.int32) + 255) % 256     # int8 byte -> cost (255 unknown)
@@ -44,10 +44,6 @@ _COST = (mask_cost_plus_one_table().astype(np.int32) + 255) % 256     # int8 byt
 def _parts(*arrays):
   """The exact sum of float32 parts (each array a scalar part, or None) as a Fraction."""
   return sum((Fraction(float(a)) for a in arrays if a is not None), Fraction(0))
-
-
-def _finite(*arrays) -> bool:
-  return all(a is None or bool(np.all(np.isfinite(np.asarray(a, np.float64)))) for a in arrays)
 
 
 def _floor_cells(origin, res, mask_origin, mask_res, n, size):
@@ -117,6 +113,11 @@ def redo(costmap, idx, idx_ok, state, window, enabled, transform, *, mask, confi
   data = {}                         # the masks the robots read, copied to the host once each
   m_origin, m_res = np.asarray(mask.origin), np.asarray(mask.resolution)
   m_origin_lo = None if mask.origin_lo is None else np.asarray(mask.origin_lo)
+  # The device path's test (common.usable_geometry) in NumPy: no device op to compile per sub-fleet size.
+  geometry_ok = costmap_geometry_ok(dataclasses.replace(costmap, origin=origin, resolution=res, origin_lo=origin_lo,
+                                                        resolution_lo=res_lo), xp=np)
+  mask_ok = mask_geometry_ok(dataclasses.replace(mask, origin=m_origin, resolution=m_res, origin_lo=m_origin_lo),
+                             xp=np)
   idx, idx_ok = np.asarray(idx), np.asarray(idx_ok)
   lethal, last = np.asarray(state.is_pose_lethal), np.asarray(state.last_pose_lethal)
   window, enabled = np.asarray(window), np.asarray(enabled)
@@ -124,16 +125,12 @@ def redo(costmap, idx, idx_ok, state, window, enabled, transform, *, mask, confi
   error = np.zeros(cost.shape[0], bool)
   for r in range(cost.shape[0]):
     i = int(idx[r])
-    usable = bool(idx_ok[r]) and 0 <= i < m
-    if usable:
-      r_lo = None if res_lo is None else res_lo[r]
-      o_lo = None if origin_lo is None else origin_lo[r]
-      mo_lo = None if m_origin_lo is None else m_origin_lo[i]
-      usable = (_finite(res[r], r_lo, origin[r], o_lo) and float(res[r]) >= F32_TINY
-                and _finite(m_res[i], m_origin[i], mo_lo) and float(m_res[i]) >= F32_TINY)
-    if not usable:
+    if not (bool(idx_ok[r]) and 0 <= i < m and mask_ok[i] and geometry_ok[r]):
       error[r] = True        # left untouched, as a robot with an out-of-range mask index
       continue
+    r_lo = None if res_lo is None else res_lo[r]
+    o_lo = None if origin_lo is None else origin_lo[r]
+    mo_lo = None if m_origin_lo is None else m_origin_lo[i]
     o = [_parts(origin[r, a], *(() if o_lo is None else o_lo[a])) for a in (0, 1)]
     mo = [_parts(m_origin[i, a], *(() if mo_lo is None else mo_lo[a])) for a in (0, 1)]
     if i not in data:
