@@ -40,7 +40,7 @@ tables (exact floors by two float32 comparisons).
 """
 
 from jaxfilters.geometry.exact import (as_terms, exact_product, exact_sign, exact_sign_affine,
-                                       expansion, expansion_sign, expansion_sign_rolled,
+                                       expansion, expansion_sign, fixed_point_sign,
                                        floor_div_exact, floor_quotient, split12, stack_terms,
                                        trunc_div_exact, two_sum)
 from jaxfilters.geometry.cells import (cell_centre_terms, centres_to_cells_2d, origin_terms,
@@ -53,7 +53,7 @@ from jaxfilters.geometry.edges import (edge_reciprocal, edge_thresholds, float32
 
 __all__ = ['as_terms', 'cell_centre_terms', 'centre_floor_bracket', 'centres_to_cells_2d',
            'edge_reciprocal', 'edge_thresholds', 'exact_product', 'exact_sign', 'exact_sign_affine',
-           'expansion', 'expansion_sign', 'expansion_sign_rolled', 'float32_key', 'floor_bracket',
+           'expansion', 'expansion_sign', 'fixed_point_sign', 'float32_key', 'floor_bracket',
            'floor_by_edges', 'floor_div_checked', 'floor_div_exact', 'floor_quotient',
            'key_float32', 'origin_terms', 'quotient_bracket', 'resolution_terms', 'rounded_product',
            'split12', 'stack_terms', 'transform_points', 'trunc_div_exact', 'two_sum',

@@ -60,9 +60,9 @@ def axis_cells(shape, origin, res, mask_origin, mask_res, mshape):
 
 
 def exact_axis_cells(shape, origin, res, mask_origin, mask_res, mshape):
-  """`geometry.centres_to_cells_2d` (rolled expansions: a fallback, so compile time counts more)."""
+  """`geometry.centres_to_cells_2d` with `geometry.fixed_point_sign` (a fallback, so compile time counts more)."""
   return geometry.centres_to_cells_2d(shape, origin, res, mask_origin, mask_res, mshape,
-                                      sign_fn=geometry.expansion_sign_rolled)
+                                      sign_fn=geometry.fixed_point_sign)
 
 
 def _slice_start(k0, n, size):
@@ -174,8 +174,8 @@ def slice_test_one(shape, origin, res, mask_origin, mask_res, mshape, box, *, ex
   idx = ends.astype(_F32)
   if exact:
     terms = geometry.cell_centre_terms(idx, o, res) + [-t for t in mo]
-    cells = geometry.floor_div_exact(terms, mask_res, sign_fn=geometry.expansion_sign_rolled)
-    negative = geometry.expansion_sign_rolled(terms) < 0
+    cells = geometry.floor_div_exact(terms, mask_res, sign_fn=geometry.fixed_point_sign)
+    negative = geometry.fixed_point_sign(terms) < 0
     # An exact floor is the floor for |quotient| < 2**22; beyond, its sign and side are still right.
     lo = jnp.where(negative, jnp.minimum(cells, -1), cells)
     k0, sliced, _ = _slice_decision(ends, empty, lo, lo, jnp.ones_like(negative), size, n)

@@ -44,7 +44,7 @@ def same_frame_window(shape_m, mask_origin, mask_res, origin, res, window):
   o = [-four(t) for t in geometry.as_terms(origin)]
   extent = jnp.asarray([0.0, 0.0, wm, hm], _F32)       # corners (0, 0) and (Wm, Hm)
   g = geometry.trunc_div_exact([*mo, *geometry.exact_product(extent, mask_res), half, *o], res,
-                               sign_fn=geometry.expansion_sign_rolled)
+                               sign_fn=geometry.fixed_point_sign)
   g0, g1 = (g[0], g[1]), (g[2], g[3])
   overlap = ~((g0[0] >= max_i) | (g0[1] >= max_j)) & ~((g1[0] <= min_i) | (g1[1] <= min_j))
   x0, y0 = jnp.maximum(min_i, g0[0]), jnp.maximum(min_j, g0[1])
@@ -131,7 +131,8 @@ def keepout_stack_one(cost, origin, res, stack, i, mask_origin, mask_res, state,
   rows = jnp.arange(h, dtype=jnp.int32)
   if transform is None and axes is None:
     overlap, (x0, y0, x1, y1) = same_frame_window((hm, wm), mask_origin, mask_res, origin, res, window)
-    (mx, vx), (my, vy) = geometry.centres_to_cells_2d((h, w), origin, res, mask_origin, mask_res, (hm, wm))
+    (mx, vx), (my, vy) = geometry.centres_to_cells_2d((h, w), origin, res, mask_origin, mask_res, (hm, wm),
+                                                        sign_fn=geometry.fixed_point_sign)
     visit = (((cols >= x0) & (cols < x1) & vx)[None, :] & ((rows >= y0) & (rows < y1) & vy)[:, None])
     mask_val = flat[base + my[:, None] * wm + mx[None, :]]
   else:

@@ -80,11 +80,11 @@ def test_mask_cost_u8_is_occ_to_cost_for_every_byte():
 finite32 = st.floats(-1e4, 1e4, width=32, allow_nan=False).filter(lambda v: v == 0 or abs(v) >= 1e-30)
 
 
-_signs = jax.jit(lambda t: (geometry.expansion_sign_rolled(list(t)), geometry.expansion_sign(list(t))))
+_signs = jax.jit(lambda t: (geometry.fixed_point_sign(list(t)), geometry.expansion_sign(list(t))))
 
 
 @given(st.lists(finite32, min_size=2, max_size=9), st.integers(0, 8))
-def test_expansion_sign_rolled_equals_unrolled(values, cancel):
+def test_fixed_point_sign_equals_expansion_sign(values, cancel):
   # Cancelling pairs and exact sums of 0 make the sign hinge on the smallest parts.
   terms = list(np.float32(values)) + [-np.float32(v) for v in values[:cancel]]
   padded = np.zeros(18, np.float32)
@@ -92,6 +92,58 @@ def test_expansion_sign_rolled_equals_unrolled(values, cancel):
   got, want = (int(v) for v in _signs(jnp.asarray(padded)))
   exact = sum(Fraction(float(t)) for t in terms)
   assert got == want == (exact > 0) - (exact < 0)
+
+
+any_finite32 = st.floats(width=32, allow_nan=False, allow_infinity=False, allow_subnormal=True)
+
+
+@given(st.lists(any_finite32, min_size=1, max_size=24), st.integers(0, 24))
+def test_fixed_point_sign_over_the_whole_float32_range(values, cancel):
+  # Subnormals (2**-149, the fixed point's unit), float32's largest values (its top limbs) and
+  # exact cancellation between them.
+  terms = [np.float32(v) for v in values] + [-np.float32(v) for v in values[:cancel]]
+  got = int(_fixed_sign(jnp.asarray(np.asarray(terms, np.float32))))
+  exact = sum(Fraction(float(t)) for t in terms)
+  assert got == (exact > 0) - (exact < 0)
+
+
+_fixed_sign = jax.jit(lambda t: geometry.fixed_point_sign(list(t)))
+
+
+def _exact_signs(terms):
+  """The exact sign of each column's sum (float32 [n, L]), in Python integers (units of 2**-149)."""
+  out = []
+  for col in terms.T:
+    total = 0
+    for v in col.tolist():
+      num, den = float(v).as_integer_ratio()
+      total += num * ((1 << 149) // den)
+    out.append((total > 0) - (total < 0))
+  return np.asarray(out)
+
+
+def test_fixed_point_sign_on_random_bit_patterns_and_near_ties():
+  # 20,000 lanes of 1-40 terms: random bit patterns (every exponent), sums that cancel to 0 exactly
+  # or to one subnormal unit, a huge term against many small ones, and many terms of one limb (carries).
+  rng = np.random.default_rng(7)
+  lanes = 2000
+  for n in (1, 2, 5, 13, 24, 40):
+    bits = rng.integers(0, 2 ** 32, (n, lanes), dtype=np.uint64).astype(np.uint32)
+    t = bits.view(np.float32).copy()
+    t[~np.isfinite(t)] = 0.0
+    kind = rng.integers(0, 5, lanes)
+    half = n // 2
+    if half:
+      t[half:2 * half, kind == 1] = -t[:half, kind == 1]                   # cancels to 0 (odd n: one left)
+      tiny = np.float32(2.0 ** -149) * rng.choice([-1, 1], lanes).astype(np.float32)
+      t[half:2 * half, kind == 2] = -t[:half, kind == 2]
+      t[-1, kind == 2] = tiny[kind == 2]                                    # cancels to +-2**-149 (or near)
+    t[:, kind == 3] = (rng.integers(2 ** 23, 2 ** 24, (n, lanes)) * rng.choice([-1, 1], (n, lanes))
+                       ).astype(np.float32)[:, kind == 3]                   # full 24-bit mantissas, one scale
+    t[0, kind == 4] = np.float32(3.0e38)
+    t[1:, kind == 4] = -np.float32(1.0e37)
+    got = np.asarray(_fixed_sign(jnp.asarray(t)))
+    np.testing.assert_array_equal(got, _exact_signs(t), err_msg=f"{n} terms")
 
 
 def _exact_floor(x, origin_parts, res):
