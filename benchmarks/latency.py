@@ -12,6 +12,8 @@ microseconds per call over rotated input sets of 60 x 60 windows on a 2000 x 200
 
 * eager: the public function called from Python, as in a notebook cell (a result blocked on);
 * jitted: the public function inside the caller's `jax.jit`, every input an argument;
+* jitted first call: the seconds of the jitted function's first call (trace, compile with the
+  exact reruns in the program, one run; persistent compilation cache off), before any eager call;
 * lean C++: benchmarks/lean_keepout_peer.cpp (built by benchmarks/nav2_peer.py, g++ -O2,
   one core), on the same robots in the same process, timed between blocks of the JAX runs,
   its integers checked against the JAX output first (nav2_peer.check).
@@ -123,13 +125,18 @@ def keepout_rows(path, b):
   jitted_fn = jax.jit(lambda cm, mask, tf, poses, state: jf.keepout_filter(cm, mask, poses, state, transform=tf,
                                                                              config=config)[0].cost)
   jitted = lambda cm, mask, tf: jitted_fn(cm, mask, tf, poses, state)
+  # The caller's jit compiles the whole filter, its exact reruns in it, at its first call: timed
+  # before any eager call, so no trace of the filter's parts is cached yet.
+  t = time.perf_counter()
+  _block(jitted(*sets[0]))
+  jit_first_s = time.perf_counter() - t
   outs = [np.asarray(eager(*s)) for s in sets]
   for s, o in zip(sets, outs):
     if not np.array_equal(np.asarray(jitted(*s)), o):
       raise AssertionError(f"keepout {path} B={b}: eager and jitted results differ")
   lean = Lean(sets) if not escape else None
   check = lean.check(outs) if lean else "escape mode: no C++ peer (the lean loop has no override)"
-  row = dict(filter=f"keepout_{path}", B=b)
+  row = dict(filter=f"keepout_{path}", B=b, jit_first_call_s=jit_first_s)
   row["eager_us"], row["eager_n"] = [v if k else v * 1e6 for k, v in enumerate(time_calls(eager, sets))]
   between = lean.block if lean else None
   row["jit_us"], row["jit_n"] = [v if k else v * 1e6 for k, v in enumerate(time_calls(jitted, sets,
@@ -215,12 +222,12 @@ def cold_compile(entry):
 
 
 def table(rows):
-  lines = ["| filter | B | eager us | jitted us | lean C++ us | C++/jitted | C++/eager |",
-           "| --- | ---: | ---: | ---: | ---: | ---: | ---: |"]
+  lines = ["| filter | B | eager us | jitted us | lean C++ us | C++/jitted | C++/eager | jitted first call s |",
+           "| --- | ---: | ---: | ---: | ---: | ---: | ---: | ---: |"]
   f = lambda v, d=1: "" if v is None else (f"{v:.{d}f}" if v < 100 else f"{v:,.0f}")
   for r in rows:
     lines.append(f"| {r['filter']} | {r['B']:,} | {f(r['eager_us'])} | {f(r['jit_us'])} | {f(r.get('lean_cpp_us'))} "
-                 f"| {f(r.get('jit_vs_cpp'), 2)} | {f(r.get('eager_vs_cpp'), 2)} |")
+                 f"| {f(r.get('jit_vs_cpp'), 2)} | {f(r.get('eager_vs_cpp'), 2)} | {f(r.get('jit_first_call_s'), 2)} |")
   return "\n".join(lines)
 
 
@@ -248,6 +255,9 @@ def main(argv=None):
   entries = [e for e in args.entries.split(",") if e]
   if any(e not in COLD_ENTRIES for e in entries):
     p.error(f"--entries: choose from {', '.join(COLD_ENTRIES)}; got {args.entries!r}")
+  # Every compile is a cold one: a persistent cache folder in the environment would turn the
+  # jitted first calls into cache reads.
+  jax.config.update("jax_enable_compilation_cache", False)
   dev = jax.devices()[0]
   print(f"# {jax.default_backend()} {dev.device_kind}, jax {jax.__version__}, {os.cpu_count()} host cores, "
         f"{HW}x{HW} windows, {MASK}x{MASK} mask", flush=True)
