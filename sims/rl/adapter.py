@@ -183,7 +183,7 @@ class GymnaxAdapter:
         states, left = carry
         idx = jnp.nonzero(left, size=cap, fill_value=axis_size)[0]      # axis_size: no env (dropped)
         new = jax.vmap(fresh)(key[jnp.minimum(idx, axis_size - 1)])
-        states = jax.tree.map(lambda s, n: s.at[idx].set(n.astype(s.dtype), mode="drop"), states, new)
+        states = _set_rows(states, idx, jax.tree.map(lambda s, n: n.astype(s.dtype), states, new))
         return states, left.at[idx].set(False, mode="drop")
 
       states, _ = jax.lax.while_loop(lambda c: jnp.any(c[1]), one_pass, (current, done))
@@ -204,6 +204,34 @@ class GymnaxAdapter:
   @property
   def name(self) -> str:
     return type(self.env.unwrapped).__name__
+
+
+def _set_rows(states, idx, new):
+  """`states` with rows `idx` (int [cap]; entries out of range dropped) set to `new`'s, every leaf.
+
+  XLA:CPU expands each scatter into a loop of its own: with one per leaf of the env state (~90)
+  they were a large part of the PPO training program's compile on a CPU. There, the leaves of one
+  dtype go through one scatter (flattened per row and concatenated: the same values, bit for bit);
+  elsewhere each leaf is scattered in place.
+  """
+  if jax.default_backend() != "cpu":
+    return jax.tree.map(lambda s, n: s.at[idx].set(n, mode="drop"), states, new)
+  leaves, treedef = jax.tree.flatten(states)
+  new_leaves = treedef.flatten_up_to(new)
+  groups = {}
+  for i, x in enumerate(leaves):
+    groups.setdefault(x.dtype, []).append(i)
+  out = list(leaves)
+  for members in groups.values():
+    n_rows = leaves[members[0]].shape[0]
+    flat = lambda xs: jnp.concatenate([x.reshape(x.shape[0], -1) for x in xs], axis=1)
+    packed = flat([leaves[i] for i in members]).at[idx].set(flat([new_leaves[i] for i in members]), mode="drop")
+    at = 0
+    for i in members:
+      size = math.prod(leaves[i].shape[1:])
+      out[i] = packed[:, at:at + size].reshape((n_rows,) + leaves[i].shape[1:])
+      at += size
+  return jax.tree.unflatten(treedef, out)
 
 
 def _where(done, a, b):
