@@ -206,15 +206,17 @@ class GymnaxAdapter:
     return type(self.env.unwrapped).__name__
 
 
-def _set_rows(states, idx, new):
+def _set_rows(states, idx, new, *, packed: bool | None = None):
   """`states` with rows `idx` (int [cap]; entries out of range dropped) set to `new`'s, every leaf.
 
   XLA:CPU expands each scatter into a loop of its own: with one per leaf of the env state (~90)
-  they were a large part of the PPO training program's compile on a CPU. There, the leaves of one
-  dtype go through one scatter (flattened per row and concatenated: the same values, bit for bit);
-  elsewhere each leaf is scattered in place.
+  they were a large part of the PPO training program's compile on a CPU. There (`packed` None:
+  the default backend is a CPU), the leaves of one dtype go through one scatter (flattened per
+  row and concatenated: the same values, bit for bit); elsewhere each leaf is scattered in place.
   """
-  if jax.default_backend() != "cpu":
+  if packed is None:
+    packed = jax.default_backend() == "cpu"
+  if not packed:
     return jax.tree.map(lambda s, n: s.at[idx].set(n, mode="drop"), states, new)
   leaves, treedef = jax.tree.flatten(states)
   new_leaves = treedef.flatten_up_to(new)
@@ -224,7 +226,7 @@ def _set_rows(states, idx, new):
   out = list(leaves)
   for members in groups.values():
     n_rows = leaves[members[0]].shape[0]
-    flat = lambda xs: jnp.concatenate([x.reshape(x.shape[0], -1) for x in xs], axis=1)
+    flat = lambda xs: jnp.concatenate([x.reshape(x.shape[0], math.prod(x.shape[1:])) for x in xs], axis=1)
     packed = flat([leaves[i] for i in members]).at[idx].set(flat([new_leaves[i] for i in members]), mode="drop")
     at = 0
     for i in members:

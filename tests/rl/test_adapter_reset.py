@@ -104,3 +104,26 @@ def test_fleet_worlds_whose_time_is_up_are_reset_alone():
     restarts = int((np.asarray(a.steps) == 0).sum())
     assert 1 <= restarts < worlds                           # some worlds restart at every step, never all
     st = a
+
+
+@pytest.mark.parametrize("packed", [True, False], ids=["one_scatter_per_dtype", "one_per_leaf"])
+def test_set_rows_writes_the_chosen_rows_of_every_leaf(packed):
+  # The write-back of the fresh resets (`_set_rows`), both forms, on leaves of every kind an env state
+  # has: float32 of several shapes, int32, bool, uint32 keys, a zero-size leaf; indices past the batch
+  # (the unused slots) dropped.
+  from sims.rl.adapter import _set_rows
+  rng = np.random.default_rng(0)
+  n = 6
+  states = {"pos": rng.normal(size=(n, 3)).astype(np.float32), "m": rng.normal(size=(n, 2, 2)).astype(np.float32),
+            "steps": rng.integers(0, 9, n).astype(np.int32), "done": rng.random(n) < 0.5,
+            "key": rng.integers(0, 2 ** 32, (n, 2), dtype=np.uint64).astype(np.uint32),
+            "empty": np.zeros((n, 0), np.float32), "scalar": rng.normal(size=n).astype(np.float32)}
+  idx = np.asarray([4, 1, n, n], np.int32)
+  new = {k: (np.asarray(v)[:4] + 1).astype(v.dtype) if v.dtype != bool else ~np.asarray(v)[:4]
+         for k, v in states.items()}
+  got = jax.jit(lambda s, i, x: _set_rows(s, i, x, packed=packed))(states, idx, new)
+  for k, v in states.items():
+    want = np.array(v)
+    want[4], want[1] = new[k][0], new[k][1]
+    assert got[k].dtype == v.dtype and got[k].shape == v.shape, k
+    np.testing.assert_array_equal(np.asarray(got[k]), want, err_msg=k)
