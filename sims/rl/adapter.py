@@ -183,7 +183,7 @@ class GymnaxAdapter:
         states, left = carry
         idx = jnp.nonzero(left, size=cap, fill_value=axis_size)[0]      # axis_size: no env (dropped)
         new = jax.vmap(fresh)(key[jnp.minimum(idx, axis_size - 1)])
-        states = _set_rows(states, idx, jax.tree.map(lambda s, n: n.astype(s.dtype), states, new))
+        states = set_rows(states, idx, jax.tree.map(lambda s, n: n.astype(s.dtype), states, new))
         return states, left.at[idx].set(False, mode="drop")
 
       states, _ = jax.lax.while_loop(lambda c: jnp.any(c[1]), one_pass, (current, done))
@@ -206,7 +206,7 @@ class GymnaxAdapter:
     return type(self.env.unwrapped).__name__
 
 
-def _set_rows(states, idx, new, *, packed: bool | None = None):
+def set_rows(states, idx, new, *, packed: bool | None = None):
   """`states` with rows `idx` (int [cap]; entries out of range dropped) set to `new`'s, every leaf.
 
   XLA:CPU expands each scatter into a loop of its own: with one per leaf of the env state (~90)
@@ -240,4 +240,5 @@ def _where(done, a, b):
   return jax.tree.map(lambda x, y: jnp.where(done, x, y), a, b)
 
 
-__all__ = ["AdapterParams", "AdapterState", "GymnaxAdapter", "RESET_CAPACITY_AUTO", "auto_reset_capacity"]
+__all__ = ["AdapterParams", "AdapterState", "GymnaxAdapter", "RESET_CAPACITY_AUTO", "auto_reset_capacity",
+           "set_rows"]

@@ -108,10 +108,10 @@ def test_fleet_worlds_whose_time_is_up_are_reset_alone():
 
 @pytest.mark.parametrize("packed", [True, False], ids=["one_scatter_per_dtype", "one_per_leaf"])
 def test_set_rows_writes_the_chosen_rows_of_every_leaf(packed):
-  # The write-back of the fresh resets (`_set_rows`), both forms, on leaves of every kind an env state
+  # The write-back of the fresh resets (`set_rows`), both forms, on leaves of every kind an env state
   # has: float32 of several shapes, int32, bool, uint32 keys, a zero-size leaf; indices past the batch
   # (the unused slots) dropped.
-  from sims.rl.adapter import _set_rows
+  from sims.rl.adapter import set_rows
   rng = np.random.default_rng(0)
   n = 6
   states = {"pos": rng.normal(size=(n, 3)).astype(np.float32), "m": rng.normal(size=(n, 2, 2)).astype(np.float32),
@@ -121,7 +121,7 @@ def test_set_rows_writes_the_chosen_rows_of_every_leaf(packed):
   idx = np.asarray([4, 1, n, n], np.int32)
   new = {k: (np.asarray(v)[:4] + 1).astype(v.dtype) if v.dtype != bool else ~np.asarray(v)[:4]
          for k, v in states.items()}
-  got = jax.jit(lambda s, i, x: _set_rows(s, i, x, packed=packed))(states, idx, new)
+  got = jax.jit(lambda s, i, x: set_rows(s, i, x, packed=packed))(states, idx, new)
   for k, v in states.items():
     want = np.array(v)
     want[4], want[1] = new[k][0], new[k][1]
