@@ -95,18 +95,19 @@ def fixed_point_sign(terms: Sequence[jax.Array]) -> jax.Array:
   expo = ((bits >> 23) & 0xFF).astype(jnp.int32)
   mant = jnp.where(expo > 0, (bits & 0x7FFFFF) | 0x800000, bits & 0x7FFFFF)
   pos = jnp.maximum(expo, 1) - 1                      # the value is mant * 2**(pos - 149)
-  limb, off = pos >> 4, (pos & 15).astype(jnp.uint32)
-  pieces = [(mant << off) & 0xFFFF, (mant >> (16 - off)) & 0xFFFF,
-            jnp.where(off == 0, jnp.uint32(0), mant >> (32 - off))]
+  limb, off = pos // _LIMB_BITS, (pos % _LIMB_BITS).astype(jnp.uint32)
+  low = (1 << _LIMB_BITS) - 1
+  # m * 2**off spans at most three limbs (24 + 15 bits): its bits 0-15, 16-31 and 32 up.
+  pieces = [(mant << off) & low, (mant >> (_LIMB_BITS - off)) & low,
+            jnp.where(off == 0, jnp.uint32(0), mant >> (2 * _LIMB_BITS - off))]
   sign = jnp.where((bits >> 31) == 1, -1, 1).astype(jnp.int32)
-  j = jnp.arange(_LIMBS, dtype=jnp.int32).reshape((_LIMBS,) + (1,) * t.ndim)
-  limbs = sum(jnp.sum(jnp.where(limb[None] + q == j, (piece.astype(jnp.int32) * sign)[None], 0), axis=1)
+  ids = jnp.arange(_LIMBS, dtype=jnp.int32).reshape((_LIMBS,) + (1,) * (t.ndim - 1))   # against [limbs, *shape]
+  limbs = sum(jnp.sum(jnp.where(limb[None] + q == ids[:, None], (piece.astype(jnp.int32) * sign)[None], 0), axis=1)
               for q, piece in enumerate(pieces))
   carry = (limbs + (1 << (_LIMB_BITS - 1))) >> _LIMB_BITS
   limbs = limbs - (carry << _LIMB_BITS) + jnp.concatenate([jnp.zeros_like(carry[:1]), carry[:-1]])
-  j = j[:, 0]                                          # [limbs, 1, ...] against limbs [limbs, *shape]
-  top = jnp.max(jnp.where(limbs != 0, j, -1), axis=0)
-  lead = jnp.sum(jnp.where(j == top[None], limbs, 0), axis=0)
+  top = jnp.max(jnp.where(limbs != 0, ids, -1), axis=0)
+  lead = jnp.sum(jnp.where(ids == top[None], limbs, 0), axis=0)
   return jnp.sign(lead).astype(jnp.int32)
 
 
