@@ -28,10 +28,10 @@ def test_floor_row_times_eager_and_jitted_calls(monkeypatch):
 
 
 def test_keepout_row_times_the_jitted_first_call_and_the_table_shows_it(monkeypatch):
-  # A small mask and window: the row's set-up, checks and columns, not its figures.
+  # A small mask and window: the row's set-up, checks and columns, not its figures. The escape row has
+  # no C++ peer, so nothing is built here (tests/benchmarks/test_cpp_peers.py builds it).
   monkeypatch.setattr(latency, "MASK", 200)
   monkeypatch.setattr(latency, "HW", 12)
-  monkeypatch.setattr(latency, "Lean", lambda sets: None)   # no C++ build here (tests/benchmarks/test_cpp_peers.py)
   row = latency.keepout_rows("aligned_escape", 2)
   assert row["filter"] == "keepout_aligned_escape" and row["B"] == 2
   assert row["jit_first_call_s"] > 0 and row["eager_us"] > 0 and row["jit_us"] > 0
